@@ -1,0 +1,1 @@
+"""The finepos controller: positioning loop, grasp hand-off, CLI and service."""

@@ -1,0 +1,60 @@
+"""The ``finepos`` command: one entry point, one subcommand module per job.
+
+Each module in COMMAND_MODULES defines ``register(subparsers)``, which adds its subcommand(s)
+and sets ``func`` (taking the parsed args, returning an exit code) as the parser default.
+"""
+
+from __future__ import annotations
+
+import argparse
+import importlib
+import logging
+import sys
+
+from drivers.errors import FineposError
+
+COMMAND_MODULES = (
+    "controller.commands.sim",
+    "controller.commands.bench",
+)
+
+logger = logging.getLogger("finepos")
+
+
+def build_parser() -> argparse.ArgumentParser:
+    parser = argparse.ArgumentParser(
+        prog="finepos",
+        description="Calibration-free visual fine positioning for a camera-in-hand robot arm.",
+        epilog="Example: finepos sim snapshot --out hand.png --offset 10,-5,20",
+    )
+    parser.add_argument("-v", "--verbose", action="store_true", help="debug logging on stderr")
+    sub = parser.add_subparsers(dest="command", metavar="COMMAND", required=True)
+    for name in COMMAND_MODULES:
+        importlib.import_module(name).register(sub)
+    return parser
+
+
+def setup_logging(verbose: bool) -> None:
+    logging.basicConfig(
+        level=logging.DEBUG if verbose else logging.INFO,
+        format="%(asctime)s %(levelname)s %(name)s: %(message)s",
+        stream=sys.stderr,
+    )
+
+
+def main(argv: list[str] | None = None) -> int:
+    parser = build_parser()
+    args = parser.parse_args(argv)
+    setup_logging(args.verbose)
+    try:
+        return int(args.func(args) or 0)
+    except FineposError as exc:
+        print(f"finepos: error: {exc}", file=sys.stderr)
+        return 2
+    except KeyboardInterrupt:
+        print("finepos: interrupted", file=sys.stderr)
+        return 130
+
+
+if __name__ == "__main__":
+    sys.exit(main())

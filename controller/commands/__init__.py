@@ -1,0 +1,1 @@
+"""Subcommands of the ``finepos`` CLI, one module each (listed in ``controller.cli``)."""

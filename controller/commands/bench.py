@@ -1,0 +1,12 @@
+"""``finepos bench ...``: benchmarks that print JSON numbers (medians, ratios)."""
+
+from controller.commands.leaves import register_group
+
+LEAVES = {
+    "sim": "sim_backend.bench",
+    "perception": "calibration_free.bench",
+}
+
+
+def register(subparsers) -> None:
+    register_group(subparsers, "bench", "benchmarks that print JSON", LEAVES)

@@ -1,0 +1,25 @@
+"""Shared plumbing for command groups whose leaves live in other packages.
+
+A group (``finepos sim ...``, ``finepos bench ...``) maps each leaf name to a module that
+defines ``add_arguments(parser)``, ``run(args) -> int`` and a module docstring whose first
+line is the help text. Modules are imported when the parser is built; none has import-time
+side effects.
+"""
+
+from __future__ import annotations
+
+import argparse
+import importlib
+
+
+def register_group(subparsers, name: str, help_text: str, leaves: dict[str, str]) -> None:
+    group = subparsers.add_parser(name, help=help_text, description=help_text)
+    sub = group.add_subparsers(dest=f"{name}_command", metavar="COMMAND", required=True)
+    for leaf, module_name in leaves.items():
+        module = importlib.import_module(module_name)
+        doc = (module.__doc__ or "").strip()
+        first = doc.splitlines()[0] if doc else leaf
+        parser = sub.add_parser(leaf, help=first, description=doc,
+                                formatter_class=argparse.RawDescriptionHelpFormatter)
+        module.add_arguments(parser)
+        parser.set_defaults(func=module.run)

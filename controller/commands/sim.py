@@ -1,0 +1,11 @@
+"""``finepos sim ...``: the simulated work cell and its device emulators."""
+
+from controller.commands.leaves import register_group
+
+LEAVES = {
+    "snapshot": "sim_backend.snapshot",
+}
+
+
+def register(subparsers) -> None:
+    register_group(subparsers, "sim", "the simulated work cell and device emulators", LEAVES)

@@ -1,0 +1,293 @@
+"""The device interfaces every backend implements: arm, camera, wrench sensor.
+
+Real drivers (VAL serial arm, ATI sensor, OpenCV camera), the PyBullet work cell and the test
+fakes all implement these, and ``drivers.contract`` checks each of them the same way.
+
+Lifecycle of every device: DISCONNECTED -> connect() -> INACTIVE -> activate() -> ACTIVE.
+An arm moves only while ACTIVE. A device that loses its link or sees a controller error goes to
+FAULT; it refuses motion until ``reset()`` (which reconnects) succeeds.
+"""
+
+from __future__ import annotations
+
+import enum
+import logging
+import math
+from abc import ABC, abstractmethod
+from dataclasses import dataclass
+
+import numpy as np
+
+from drivers.errors import DeviceFaultError, DeviceNotConnectedError, MotionRejectedError
+from drivers.pose import Pose, ToolStep
+from drivers.safety import SafetyLimits, check_target, check_tool_step
+
+logger = logging.getLogger(__name__)
+
+
+class Lifecycle(enum.Enum):
+    DISCONNECTED = "disconnected"
+    INACTIVE = "inactive"
+    ACTIVE = "active"
+    FAULT = "fault"
+
+
+class Device(ABC):
+    """Connection lifecycle shared by all devices. Use as a context manager."""
+
+    def __init__(self) -> None:
+        self._state = Lifecycle.DISCONNECTED
+        self._fault_reason: str | None = None
+
+    # -- lifecycle -------------------------------------------------------------------------
+    @property
+    def state(self) -> Lifecycle:
+        return self._state
+
+    @property
+    def fault_reason(self) -> str | None:
+        """Why the device is in FAULT (None otherwise)."""
+        return self._fault_reason if self._state is Lifecycle.FAULT else None
+
+    @property
+    def is_connected(self) -> bool:
+        return self._state in (Lifecycle.INACTIVE, Lifecycle.ACTIVE)
+
+    def connect(self) -> None:
+        """Open the link; DISCONNECTED/FAULT -> INACTIVE. Idempotent when connected."""
+        if self.is_connected:
+            return
+        self._open()
+        self._state = Lifecycle.INACTIVE
+        self._fault_reason = None
+
+    def activate(self) -> None:
+        """INACTIVE -> ACTIVE: from now on the device acts on commands."""
+        self._require_connected()
+        self._state = Lifecycle.ACTIVE
+
+    def deactivate(self) -> None:
+        """ACTIVE -> INACTIVE: commands are refused, readings still work."""
+        self._require_connected()
+        self._state = Lifecycle.INACTIVE
+
+    def disconnect(self) -> None:
+        """Close the link. Safe to call in any state, also twice."""
+        if self._state is Lifecycle.DISCONNECTED:
+            return
+        try:
+            self._close()
+        finally:
+            self._state = Lifecycle.DISCONNECTED
+
+    def reset(self) -> None:
+        """Leave FAULT by reconnecting; ends INACTIVE (activate again to move)."""
+        self.disconnect()
+        self.connect()
+
+    def mark_fault(self, reason: str) -> None:
+        """Enter FAULT (called by implementations on lost links, controller errors...)."""
+        logger.error("%s fault: %s", type(self).__name__, reason)
+        self._state = Lifecycle.FAULT
+        self._fault_reason = reason
+
+    def __enter__(self):
+        self.connect()
+        self.activate()
+        return self
+
+    def __exit__(self, *exc_info) -> None:
+        self.disconnect()
+
+    def _require_connected(self) -> None:
+        if self._state is Lifecycle.FAULT:
+            raise DeviceFaultError(f"{type(self).__name__} is in fault: {self._fault_reason}")
+        if not self.is_connected:
+            raise DeviceNotConnectedError(f"{type(self).__name__} is not connected")
+
+    # -- implemented by backends -------------------------------------------------------------
+    @abstractmethod
+    def _open(self) -> None:
+        """Open the link to the device (raise on failure)."""
+
+    @abstractmethod
+    def _close(self) -> None:
+        """Close the link; must not raise for an already broken link."""
+
+
+@dataclass(frozen=True)
+class Motion:
+    """What a motion command did.
+
+    requested: the step (or, for absolute moves, the target as a step) that was asked for;
+    sent: the step actually commanded after the safety layer (equal unless clipped);
+    pose: the tool pose reached; clipped: whether the safety layer changed the command.
+    """
+
+    requested: ToolStep
+    sent: ToolStep
+    pose: Pose
+    clipped: bool
+
+
+class Arm(Device):
+    """A 6-DOF arm with a parallel-jaw gripper, commanded in Cartesian tool poses.
+
+    Every motion passes ``drivers.safety`` with the limits given at construction; a command
+    beyond them is rejected (MotionRejectedError, nothing moves) or clipped, as configured.
+    Motions block until the arm stands still.
+    """
+
+    def __init__(self, limits: SafetyLimits | None = None) -> None:
+        super().__init__()
+        self.limits = limits
+
+    # -- public API -----------------------------------------------------------------------
+    def pose(self) -> Pose:
+        """Current tool pose (mm, deg)."""
+        self._require_connected()
+        return self._read_pose()
+
+    def tool_rotation_deg(self) -> float:
+        """Rotation of the tool about its (vertical) approach axis, deg."""
+        return self.pose().approach_rotation_deg
+
+    def move_to(self, target: Pose) -> Motion:
+        """Absolute Cartesian move to ``target``; returns what was done."""
+        self._require_active()
+        current = self._read_pose()
+        decision = check_target(target, current, self.limits) if self.limits else None
+        sent_target = decision.target if decision else target
+        reached = self._move_to(sent_target)
+        return Motion(current.tool_step_to(target), current.tool_step_to(sent_target), reached,
+                      bool(decision and decision.clipped))
+
+    def move_tool(self, step: ToolStep) -> Motion:
+        """Relative move in the current tool frame (computed from a fresh pose reading)."""
+        self._require_active()
+        for name, v in step.as_dict().items():
+            if not math.isfinite(v):
+                raise MotionRejectedError(f"{name} is not a finite number: {v!r}")
+        current = self._read_pose()
+        sent, clipped = step, False
+        if self.limits:
+            decision = check_tool_step(step, current, self.limits)
+            sent, clipped = decision.step, decision.clipped
+        reached = self._move_to(current.moved_in_tool_frame(sent))
+        return Motion(step, sent, reached, clipped)
+
+    def set_speed(self, percent: float) -> None:
+        """Monitor speed in percent, 0 < percent <= 100."""
+        self._require_connected()
+        if not (isinstance(percent, (int, float)) and 0 < percent <= 100):
+            raise MotionRejectedError(f"speed must be in (0, 100] percent, got {percent!r}")
+        self._set_speed(float(percent))
+
+    def halt(self) -> None:
+        """Stop any motion now. Works in every connected state, also INACTIVE and FAULT."""
+        if self._state is Lifecycle.DISCONNECTED:
+            return
+        self._halt()
+
+    def open_gripper(self) -> float:
+        """Open the jaws; returns the finger width in mm."""
+        self._require_active()
+        return self._set_gripper(closed=False)
+
+    def close_gripper(self) -> float:
+        """Close the jaws (until they meet or hold something); returns the width in mm."""
+        self._require_active()
+        return self._set_gripper(closed=True)
+
+    def finger_width_mm(self) -> float:
+        """Current distance between the fingers, mm."""
+        self._require_connected()
+        return self._finger_width_mm()
+
+    def _require_active(self) -> None:
+        self._require_connected()
+        if self._state is not Lifecycle.ACTIVE:
+            raise MotionRejectedError(f"arm is {self._state.value}, motion needs active")
+
+    # -- implemented by backends -------------------------------------------------------------
+    @abstractmethod
+    def _read_pose(self) -> Pose: ...
+
+    @abstractmethod
+    def _move_to(self, target: Pose) -> Pose:
+        """Move to the (already checked) target; return the pose reached."""
+
+    @abstractmethod
+    def _set_speed(self, percent: float) -> None: ...
+
+    @abstractmethod
+    def _halt(self) -> None: ...
+
+    @abstractmethod
+    def _set_gripper(self, closed: bool) -> float: ...
+
+    @abstractmethod
+    def _finger_width_mm(self) -> float: ...
+
+
+@dataclass(frozen=True)
+class Frame:
+    """One camera image: HxWx3 uint8 RGB, and the time it was taken (time.monotonic(), s)."""
+
+    image: np.ndarray
+    timestamp_s: float
+
+
+class Camera(Device):
+    """A colour camera delivering fixed-size RGB frames."""
+
+    width_px: int = 192
+    height_px: int = 144
+
+    def grab(self) -> Frame:
+        """Take one frame (blocks until it arrives or the timeout passes)."""
+        self._require_connected()
+        return self._grab()
+
+    @abstractmethod
+    def _grab(self) -> Frame: ...
+
+
+@dataclass(frozen=True)
+class Wrench:
+    """Forces [N] and torques [N*m] in the sensor frame (z = tool approach axis)."""
+
+    fx_n: float
+    fy_n: float
+    fz_n: float
+    tx_nm: float
+    ty_nm: float
+    tz_nm: float
+
+    def as_dict(self) -> dict[str, float]:
+        return {"fx_n": self.fx_n, "fy_n": self.fy_n, "fz_n": self.fz_n,
+                "tx_nm": self.tx_nm, "ty_nm": self.ty_nm, "tz_nm": self.tz_nm}
+
+    @property
+    def force_n(self) -> float:
+        return math.sqrt(self.fx_n**2 + self.fy_n**2 + self.fz_n**2)
+
+
+class WrenchSensor(Device):
+    """A 6-axis wrist force-torque sensor."""
+
+    def read(self) -> Wrench:
+        """One biased reading."""
+        self._require_connected()
+        return self._read()
+
+    def bias(self) -> None:
+        """Take the current load as zero for later readings."""
+        self._require_connected()
+        self._bias()
+
+    @abstractmethod
+    def _read(self) -> Wrench: ...
+
+    @abstractmethod
+    def _bias(self) -> None: ...
