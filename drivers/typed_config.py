@@ -114,7 +114,8 @@ def _convert(tp: Any, value: Any, path: str) -> Any:
         if origin is tuple and args and args[-1] is not Ellipsis:
             if len(value) != len(args):
                 raise ConfigError(f"{path}: expected {len(args)} values, got {len(value)}")
-            items = [_convert(a, v, f"{path}[{i}]") for i, (a, v) in enumerate(zip(args, value))]
+            pairs = enumerate(zip(args, value, strict=True))
+            items = [_convert(a, v, f"{path}[{i}]") for i, (a, v) in pairs]
         else:
             item_tp = args[0] if args else Any
             items = [_convert(item_tp, v, f"{path}[{i}]") for i, v in enumerate(value)]
