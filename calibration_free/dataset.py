@@ -1,0 +1,167 @@
+"""Training and test sets: images (or features), corrective-step labels and metadata, one file.
+
+Labels are ``[dx_mm, dy_mm, dphi_deg]``: the tool step (in the tool frame, ``drivers.pose.
+ToolStep`` convention) that brings the arm back to the nominal pose from where the image was
+taken. The arm is displaced by the negative of the label before the image is grabbed (paper:
+"after displacing the robot by -(dx, dy, dphi)").
+
+File format: a numpy ``.npz`` archive (read with ``allow_pickle=False``, so loading cannot run
+code) holding ``labels``, optionally ``images`` and ``features``, and ``metadata_json``, the
+UTF-8 JSON of ``{"format", "version", "metadata", "samples"}`` as a uint8 array. Written
+atomically.
+"""
+
+from __future__ import annotations
+
+import io
+import json
+import zipfile
+import zlib
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from calibration_free.errors import DatasetError
+from drivers.files import atomic_write_bytes
+
+FORMAT = "finepos-dataset"
+VERSION = 1
+LABEL_COLUMNS = ("dx_mm", "dy_mm", "dphi_deg")
+
+
+@dataclass(frozen=True)
+class Dataset:
+    """Samples for training or testing one network.
+
+    Attributes:
+        labels: (N, 3) float64 corrective steps [dx_mm, dy_mm, dphi_deg].
+        images: (N, H, W, 3) uint8 RGB hand-camera images, or None.
+        features: (N, F) float32 precomputed features, or None.
+        samples: per-sample JSON-able metadata (N dicts), or None.
+        metadata: JSON-able metadata of the whole set (object, nominal pose, a_mm, ...).
+    """
+
+    labels: np.ndarray
+    images: np.ndarray | None = None
+    features: np.ndarray | None = None
+    samples: list[dict[str, Any]] | None = None
+    metadata: dict[str, Any] = field(default_factory=dict)
+
+    def __post_init__(self) -> None:
+        labels = np.asarray(self.labels, dtype=np.float64)
+        if labels.ndim != 2 or labels.shape[1] != 3:
+            raise DatasetError(f"labels: expected (N, 3) [dx_mm, dy_mm, dphi_deg], got "
+                               f"{labels.shape}")
+        if not np.isfinite(labels).all():
+            raise DatasetError("labels: must be finite")
+        object.__setattr__(self, "labels", labels)
+        n = labels.shape[0]
+        if self.images is not None:
+            im = self.images
+            if not isinstance(im, np.ndarray) or im.dtype != np.uint8 or im.ndim != 4 \
+                    or im.shape[0] != n or im.shape[3] != 3:
+                raise DatasetError(f"images: expected ({n}, H, W, 3) uint8, got "
+                                   f"{getattr(im, 'shape', None)} "
+                                   f"{getattr(im, 'dtype', type(im))}")
+        if self.features is not None:
+            f = np.asarray(self.features, dtype=np.float32)
+            if f.ndim != 2 or f.shape[0] != n or not np.isfinite(f).all():
+                raise DatasetError(f"features: expected ({n}, F) finite values, got {f.shape}")
+            object.__setattr__(self, "features", f)
+        if self.samples is not None and len(self.samples) != n:
+            raise DatasetError(f"samples: expected {n} metadata entries, got "
+                               f"{len(self.samples)}")
+
+    def __len__(self) -> int:
+        return self.labels.shape[0]
+
+    def save(self, path: str | Path) -> None:
+        """Write the set to ``path`` (npz) atomically.
+
+        Raises:
+            DatasetError: the metadata is not JSON-serialisable.
+        """
+        try:
+            meta = json.dumps({"format": FORMAT, "version": VERSION,
+                               "metadata": self.metadata, "samples": self.samples},
+                              allow_nan=False)
+        except (TypeError, ValueError) as exc:
+            raise DatasetError(f"{path}: metadata is not JSON-serialisable: {exc}") from exc
+        arrays = {"labels": self.labels,
+                  "metadata_json": np.frombuffer(meta.encode("utf-8"), dtype=np.uint8)}
+        if self.images is not None:
+            arrays["images"] = self.images
+        if self.features is not None:
+            arrays["features"] = self.features
+        buffer = io.BytesIO()
+        np.savez_compressed(buffer, **arrays)
+        atomic_write_bytes(path, buffer.getvalue())
+
+    @classmethod
+    def load(cls, path: str | Path) -> Dataset:
+        """Read a set written by ``save``.
+
+        Raises:
+            DatasetError: the file is missing, not a dataset, corrupt, truncated or of another
+                version.
+        """
+        try:
+            with np.load(path, allow_pickle=False) as npz:
+                arrays = {k: npz[k] for k in npz.files}
+        except (OSError, ValueError, EOFError, KeyError, zipfile.BadZipFile,
+                zlib.error) as exc:
+            raise DatasetError(f"{path}: cannot read dataset: {exc}") from exc
+        if "labels" not in arrays or "metadata_json" not in arrays:
+            raise DatasetError(f"{path}: not a finepos dataset (labels or metadata missing)")
+        try:
+            meta = json.loads(arrays["metadata_json"].tobytes().decode("utf-8"))
+        except (UnicodeDecodeError, json.JSONDecodeError) as exc:
+            raise DatasetError(f"{path}: metadata is not valid JSON: {exc}") from exc
+        if not isinstance(meta, dict) or meta.get("format") != FORMAT:
+            raise DatasetError(f"{path}: not a finepos dataset")
+        if meta.get("version") != VERSION:
+            raise DatasetError(f"{path}: dataset version {meta.get('version')!r} is not "
+                               f"supported (this finepos reads version {VERSION})")
+        try:
+            return cls(arrays["labels"], arrays.get("images"), arrays.get("features"),
+                       meta.get("samples"), meta.get("metadata") or {})
+        except DatasetError as exc:
+            raise DatasetError(f"{path}: {exc}") from exc
+
+
+def grid_offsets(a_mm: float, b_deg: float, shape: tuple[int, int, int] = (3, 3, 7)) \
+        -> np.ndarray:
+    """Labels of the training grid: every combination of evenly spaced dx, dy, dphi.
+
+    Args:
+        a_mm: translations span [-a_mm, a_mm] on both axes.
+        b_deg: rotations span [-b_deg, b_deg].
+        shape: number of values along (dx, dy, dphi); an axis with 1 value sits at 0.
+
+    Returns:
+        (nx * ny * nphi, 3) float64 labels, dx slowest and dphi fastest.
+
+    Raises:
+        DatasetError: a negative span or an axis with fewer than one value.
+    """
+    if a_mm < 0 or b_deg < 0 or len(shape) != 3 or any(n < 1 for n in shape):
+        raise DatasetError(f"grid: need a_mm, b_deg >= 0 and three counts >= 1, got "
+                           f"a_mm={a_mm}, b_deg={b_deg}, shape={shape}")
+    axes = [np.linspace(-span, span, n) if n > 1 else np.zeros(1)
+            for span, n in zip((a_mm, a_mm, b_deg), shape, strict=True)]
+    mesh = np.meshgrid(*axes, indexing="ij")
+    return np.stack([m.ravel() for m in mesh], axis=1)
+
+
+def random_offsets(rng: np.random.Generator, n: int, a_mm: float, b_deg: float) -> np.ndarray:
+    """n labels drawn uniformly from [-a, a] x [-a, a] x [-b, b] (the paper's test sets).
+
+    Raises:
+        DatasetError: n < 1 or a negative span.
+    """
+    if n < 1 or a_mm < 0 or b_deg < 0:
+        raise DatasetError(f"random offsets: need n >= 1 and spans >= 0, got n={n}, "
+                           f"a_mm={a_mm}, b_deg={b_deg}")
+    return rng.uniform((-a_mm, -a_mm, -b_deg), (a_mm, a_mm, b_deg), size=(n, 3))

@@ -1,0 +1,226 @@
+"""Object localisation: binarise the normalised image and find the object's sub-pixel centre.
+
+Two paths give the same answer on a clean image:
+
+* histogram path (fast): the column and row sums of the binary mask. If each has a single run
+  of non-zero bins, the bounding box is compact for the area, and the area matches the trained
+  object, the mask holds one object and its centroid is read off the two sums.
+* connected components (cluttered images): every blob is measured; the one whose area matches
+  the trained object's is picked. No match is ``no_object``; several matches are
+  ``ambiguous``. Neither is ever turned into a guess.
+
+Coordinates are pixel-centre coordinates: pixel (row i, column j) covers u in [j - 0.5, j + 0.5].
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from typing import Literal
+
+import cv2
+import numpy as np
+
+from calibration_free.errors import ImageError
+from drivers.errors import ConfigError
+
+Status = Literal["ok", "no_object", "ambiguous"]
+Polarity = Literal["bright", "dark"]
+Method = Literal["histogram", "components"]
+
+# Blobs smaller than this (pixels) are noise, never an object.
+MIN_BLOB_PX = 12
+# A blob matches the trained object when |area / expected - 1| <= this.
+AREA_TOLERANCE = 0.35
+# Without an expected area, the largest blob is ambiguous if the runner-up has this fraction
+# of its area or more.
+AMBIGUITY_RATIO = 0.8
+# The histogram path trusts a mask whose bounding box is at most this many times its area
+# (a square at any rotation fills at least half of its box); others go to components.
+MAX_BOX_TO_AREA = 2.5
+
+
+@dataclass(frozen=True)
+class Localisation:
+    """Result of localising the object in one image.
+
+    Attributes:
+        status: "ok" (one object found), "no_object" (nothing matches the trained object) or
+            "ambiguous" (several blobs match equally well).
+        u_px: column of the object's centroid (sub-pixel); None unless status is "ok".
+        v_px: row of the object's centroid (sub-pixel); None unless status is "ok".
+        area_px: area of the object's blob in pixels; None unless status is "ok".
+        reason: human-readable explanation ("" when ok via the histogram path).
+        method: which path decided: "histogram" or "components".
+    """
+
+    status: Status
+    u_px: float | None
+    v_px: float | None
+    area_px: float | None
+    reason: str
+    method: Method
+
+    @property
+    def ok(self) -> bool:
+        return self.status == "ok"
+
+
+_COORDS: dict[int, np.ndarray] = {}
+
+
+def _coords(n: int) -> np.ndarray:
+    """0, 1, ..., n-1 as float64 (cached: the hot path must not allocate)."""
+    c = _COORDS.get(n)
+    if c is None:
+        c = _COORDS[n] = np.arange(n, dtype=np.float64)
+    return c
+
+
+def binarise(normalised: np.ndarray, threshold: float, polarity: Polarity = "bright") \
+        -> np.ndarray:
+    """Object mask of a normalised image: float32 1.0 where the object is, 0.0 elsewhere.
+
+    Args:
+        normalised: HxW float32 image after ``preprocess.normalise``.
+        threshold: grey level (normalised units) separating object and background.
+        polarity: "bright" (object above the threshold) or "dark" (object below it).
+
+    Raises:
+        ImageError: the image is not a non-empty 2-D float32 array, or polarity is unknown.
+    """
+    if not isinstance(normalised, np.ndarray) or normalised.dtype != np.float32 \
+            or normalised.ndim != 2 or normalised.size == 0:
+        raise ImageError(f"normalised image: expected HxW float32, got "
+                         f"{getattr(normalised, 'shape', None)} "
+                         f"{getattr(normalised, 'dtype', type(normalised))}")
+    if polarity == "bright":
+        kind = cv2.THRESH_BINARY
+    elif polarity == "dark":
+        kind = cv2.THRESH_BINARY_INV
+    else:
+        raise ImageError(f"polarity: must be bright or dark, got {polarity!r}")
+    return cv2.threshold(normalised, threshold, 1.0, kind)[1]
+
+
+def otsu_threshold(values: np.ndarray, bins: int = 256) -> float:
+    """Otsu's threshold of a set of grey values: the level maximising between-class variance.
+
+    Args:
+        values: any array of finite grey values (e.g. all pixels of the normalised training
+            images).
+        bins: histogram resolution.
+
+    Returns:
+        The threshold, in the units of ``values``.
+
+    Raises:
+        ImageError: non-finite values, or fewer than two distinct values.
+    """
+    v = np.asarray(values, dtype=np.float64).ravel()
+    if v.size == 0 or not np.isfinite(v).all():
+        raise ImageError("cannot choose a threshold: no values, or NaN/infinite values")
+    lo, hi = float(v.min()), float(v.max())
+    if not hi > lo:
+        raise ImageError("cannot choose a threshold: the images have a single grey level")
+    hist, edges = np.histogram(v, bins=bins, range=(lo, hi))
+    centres = 0.5 * (edges[:-1] + edges[1:])
+    # class 0 = bins 0..k, class 1 = bins k+1..; the threshold is the edge between them
+    w0 = np.cumsum(hist)[:-1].astype(np.float64)
+    w1 = v.size - w0
+    s0 = np.cumsum(hist * centres)[:-1]
+    s1 = float((hist * centres).sum()) - s0
+    valid = (w0 > 0) & (w1 > 0)
+    m0 = np.divide(s0, w0, out=np.zeros_like(s0), where=valid)
+    m1 = np.divide(s1, w1, out=np.zeros_like(s1), where=valid)
+    between = np.where(valid, w0 * w1 * (m0 - m1) ** 2, -1.0)
+    return float(edges[1 + int(np.argmax(between))])
+
+
+def localise(normalised: np.ndarray, threshold: float, expected_area_px: float | None = None,
+             *, polarity: Polarity = "bright", area_tolerance: float = AREA_TOLERANCE,
+             min_blob_px: int = MIN_BLOB_PX) -> Localisation:
+    """Find the object's centre in a normalised image.
+
+    Args:
+        normalised: HxW float32 image after ``preprocess.normalise``.
+        threshold: binarisation level in normalised grey units.
+        expected_area_px: the trained object's blob area; None picks the largest blob
+            (used while training, before the area is known).
+        polarity: "bright" or "dark": which side of the threshold the object is on.
+        area_tolerance: a blob matches when |area / expected - 1| <= this.
+        min_blob_px: blobs below this area are ignored as noise.
+
+    Returns:
+        The Localisation; see its docstring for the three statuses.
+
+    Raises:
+        ImageError: the image is not HxW float32 or polarity is unknown.
+        ConfigError: expected_area_px is not > 0.
+    """
+    if expected_area_px is not None and not expected_area_px > 0:
+        raise ConfigError(f"expected_area_px: must be > 0, got {expected_area_px!r}")
+    mask = binarise(normalised, threshold, polarity)
+    # float32 sums of 0/1 are exact (counts stay far below 2**24); centroids are in float64
+    cols = cv2.reduce(mask, 0, cv2.REDUCE_SUM)[0]
+    rows = cv2.reduce(mask, 1, cv2.REDUCE_SUM)[:, 0]
+    area = float(cols.sum())
+    if area < min_blob_px:
+        return Localisation("no_object", None, None, None,
+                            f"only {area:.0f} px beyond the threshold", "histogram")
+    matches = expected_area_px is None or \
+        abs(area / expected_area_px - 1.0) <= area_tolerance
+    if matches:
+        width = _single_run_length(cols)
+        height = _single_run_length(rows)
+        if width and height and width * height <= MAX_BOX_TO_AREA * area:
+            return Localisation("ok", float(cols @ _coords(cols.size)) / area,
+                                float(rows @ _coords(rows.size)) / area, area, "",
+                                "histogram")
+    return _by_components(mask, expected_area_px, area_tolerance, min_blob_px)
+
+
+def _single_run_length(hist: np.ndarray) -> int:
+    """Length of the non-zero run of ``hist`` if there is exactly one run, else 0."""
+    nz = hist > 0.0
+    first = int(nz.argmax())
+    last = hist.size - 1 - int(nz[::-1].argmax())
+    length = last - first + 1
+    return length if int(np.count_nonzero(nz)) == length else 0
+
+
+def _by_components(mask: np.ndarray, expected_area_px: float | None, area_tolerance: float,
+                   min_blob_px: int) -> Localisation:
+    n, _, stats, centroids = cv2.connectedComponentsWithStatsWithAlgorithm(
+        mask.astype(np.uint8), 8, cv2.CV_32S, cv2.CCL_BBDT)
+    areas = stats[1:n, cv2.CC_STAT_AREA].astype(np.float64)
+    blobs = np.flatnonzero(areas >= min_blob_px)
+    if blobs.size == 0:
+        return Localisation("no_object", None, None, None,
+                            f"no blob of {min_blob_px} px or more", "components")
+    if expected_area_px is None:
+        order = blobs[np.argsort(areas[blobs])[::-1]]
+        best = int(order[0])
+        if order.size > 1 and areas[order[1]] >= AMBIGUITY_RATIO * areas[best]:
+            return Localisation(
+                "ambiguous", None, None, None,
+                f"the two largest blobs have similar areas ({areas[best]:.0f} and "
+                f"{areas[order[1]]:.0f} px)", "components")
+        picked = best
+    else:
+        close = blobs[np.abs(areas[blobs] / expected_area_px - 1.0) <= area_tolerance]
+        if close.size == 0:
+            return Localisation(
+                "no_object", None, None, None,
+                f"no blob within {area_tolerance:.0%} of the expected {expected_area_px:.0f} px"
+                f" (largest: {areas[blobs].max():.0f} px of {blobs.size} blobs)", "components")
+        if close.size > 1:
+            found = ", ".join(f"{a:.0f}" for a in areas[close])
+            return Localisation(
+                "ambiguous", None, None, None,
+                f"{close.size} blobs match the expected {expected_area_px:.0f} px ({found} px)",
+                "components")
+        picked = int(close[0])
+    u, v = centroids[picked + 1]
+    others = blobs.size - 1
+    return Localisation("ok", float(u), float(v), float(areas[picked]),
+                        f"picked among {others + 1} blobs" if others else "", "components")

@@ -1,0 +1,138 @@
+"""Model bundle: round trip, atomic save, refusal of corrupt, truncated, foreign bundles."""
+
+from __future__ import annotations
+
+import dataclasses
+import json
+
+import numpy as np
+import pytest
+
+from calibration_free.bundle import FORMAT_VERSION, ModelBundle, _pack
+from calibration_free.errors import BundleError
+from calibration_free.gabor import GaborConfig
+from calibration_free.pipeline import Perception
+from calibration_free.synthetic import render
+
+from .conftest import KAPPA, NOMINAL_POSE
+
+
+def test_round_trip_keeps_everything(bundle, cell, tmp_path):
+    path = tmp_path / "cube.bundle"
+    bundle.save(path)
+    again = ModelBundle.load(path, expect_object="cube")
+    assert [p.name for p in tmp_path.iterdir()] == ["cube.bundle"]
+    for f in dataclasses.fields(ModelBundle):
+        if f.name not in ("nn1", "nn2"):
+            assert getattr(again, f.name) == getattr(bundle, f.name), f.name
+    assert again.kappa == KAPPA and again.nominal_pose == NOMINAL_POSE
+    assert again.format_version == FORMAT_VERSION
+    assert again.pose.as_dict() == NOMINAL_POSE
+    for name in ("nn1", "nn2"):
+        a, b = getattr(bundle, name).to_arrays(name), getattr(again, name).to_arrays(name)
+        assert a.keys() == b.keys()
+        for k in a:
+            np.testing.assert_array_equal(a[k], b[k])
+    frame = render(cell, np.array([2.0, -3.0, 12.0]), np.random.default_rng(0))
+    p, q = Perception(bundle).perceive(frame), Perception(again).perceive(frame)
+    assert (p.nn1_mm, p.nn2_sc, p.dphi_deg) == (q.nn1_mm, q.nn2_sc, q.dphi_deg)
+
+
+def info_and_tensors(bundle: ModelBundle) -> tuple[dict, dict]:
+    return bundle._info(), {**bundle.nn1.to_arrays("nn1"), **bundle.nn2.to_arrays("nn2")}
+
+
+def bad_files(bundle: ModelBundle, good: bytes) -> dict[str, bytes]:
+    header_len = int.from_bytes(good[:8], "little")
+    in_data = bytearray(good)
+    in_data[-5] ^= 0x10                       # a weight changes: only the digest sees it
+    in_header = bytearray(good)
+    marker = b'kappa\\": '                   # the info JSON sits escaped in the header
+    at = good.index(marker, 8) + len(marker)
+    assert good[at:at + 1] == b"4"
+    in_header[at] = ord("3")                  # kappa 4 -> 3: still valid JSON
+    info, tensors = info_and_tensors(bundle)
+    no_digest = _pack(info, tensors).replace(b'"sha256"', b'"sha999"')
+    return {
+        "flipped_weight": bytes(in_data),
+        "edited_header": bytes(in_header),
+        "no_digest": no_digest,
+        "truncated_half": good[: len(good) // 2],
+        "truncated_tail": good[:-3],
+        "header_only": good[: 8 + header_len],
+        "tiny": good[:5],
+        "empty": b"",
+        "garbage": b"\x00" * 64,
+    }
+
+
+def test_corrupt_or_truncated_bundles_are_refused_and_nothing_changes(bundle, tmp_path):
+    good_path = tmp_path / "cube.bundle"
+    bundle.save(good_path)
+    good = good_path.read_bytes()
+    for name, data in bad_files(bundle, good).items():
+        path = tmp_path / f"{name}.bundle"
+        path.write_bytes(data)
+        with pytest.raises(BundleError, match=path.name):
+            ModelBundle.load(path)
+        assert path.read_bytes() == data, name
+    assert good_path.read_bytes() == good
+    assert ModelBundle.load(good_path).object_kind == "cube"
+
+
+def test_checksum_catches_a_single_changed_weight(bundle, tmp_path):
+    path = tmp_path / "flip.bundle"
+    path.write_bytes(bad_files(bundle, _pack(*info_and_tensors(bundle)))["flipped_weight"])
+    with pytest.raises(BundleError, match="checksum"):
+        ModelBundle.load(path)
+
+
+def test_wrong_version_is_refused(bundle, tmp_path):
+    info, tensors = info_and_tensors(bundle)
+    info["format_version"] = FORMAT_VERSION + 1
+    path = tmp_path / "future.bundle"
+    path.write_bytes(_pack(info, tensors))
+    with pytest.raises(BundleError, match=f"version {FORMAT_VERSION + 1} is not supported"):
+        ModelBundle.load(path)
+
+
+def test_wrong_object_is_refused(bundle, tmp_path):
+    path = tmp_path / "cube.bundle"
+    bundle.save(path)
+    with pytest.raises(BundleError, match="taught on object 'cube', not 'screw'"):
+        ModelBundle.load(path, expect_object="screw")
+
+
+def test_not_a_bundle_and_missing_file_are_refused(bundle, tmp_path):
+    info, tensors = info_and_tensors(bundle)
+    info["format"] = "something-else"
+    path = tmp_path / "other.bundle"
+    path.write_bytes(_pack(info, tensors))
+    with pytest.raises(BundleError, match="not a finepos model bundle"):
+        ModelBundle.load(path)
+    with pytest.raises(BundleError, match="cannot read"):
+        ModelBundle.load(tmp_path / "missing.bundle")
+
+
+def test_inconsistent_contents_are_refused(bundle, tmp_path):
+    info, tensors = info_and_tensors(bundle)
+    del tensors["nn2.w1"]
+    path = tmp_path / "cut.bundle"
+    path.write_bytes(_pack(info, tensors))
+    with pytest.raises(BundleError, match="inconsistent"):
+        ModelBundle.load(path)
+    with pytest.raises(BundleError, match="nn2: must map 27 features"):
+        dataclasses.replace(bundle, gabor=GaborConfig(orientations_deg=(0.0, 60.0, 120.0)))
+    with pytest.raises(BundleError, match="nominal_pose"):
+        dataclasses.replace(bundle, nominal_pose={"x_mm": 1.0})
+
+
+def test_failed_save_keeps_the_old_file(bundle, tmp_path):
+    path = tmp_path / "cube.bundle"
+    bundle.save(path)
+    good = path.read_bytes()
+    broken = dataclasses.replace(bundle, training={"bad": float("nan")})
+    with pytest.raises(BundleError, match="serialise"):
+        broken.save(path)
+    assert path.read_bytes() == good
+    assert json.loads(json.dumps(bundle.training))["nn1"]["layers"] == [2, 3, 2]

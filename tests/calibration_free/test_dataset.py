@@ -1,0 +1,113 @@
+"""Datasets: one-file round trip, grids and random offsets, refusal of bad files."""
+
+from __future__ import annotations
+
+import io
+import json
+
+import numpy as np
+import pytest
+
+from calibration_free.dataset import Dataset, grid_offsets, random_offsets
+from calibration_free.errors import DatasetError
+
+
+def sample_set(n: int = 5) -> Dataset:
+    rng = np.random.default_rng(0)
+    return Dataset(labels=rng.normal(size=(n, 3)),
+                   images=rng.integers(0, 256, (n, 6, 8, 3), dtype=np.uint8),
+                   features=rng.normal(size=(n, 36)).astype(np.float32),
+                   samples=[{"index": i, "pose": {"x_mm": float(i)}} for i in range(n)],
+                   metadata={"object": "cube", "a_mm": 25.0, "kappa": 4})
+
+
+def test_round_trip_keeps_everything(tmp_path):
+    data = sample_set()
+    path = tmp_path / "set.npz"
+    data.save(path)
+    again = Dataset.load(path)
+    np.testing.assert_array_equal(again.labels, data.labels)
+    np.testing.assert_array_equal(again.images, data.images)
+    np.testing.assert_array_equal(again.features, data.features)
+    assert again.samples == data.samples and again.metadata == data.metadata
+    assert len(again) == 5
+    assert [p.name for p in tmp_path.iterdir()] == ["set.npz"]
+
+
+def test_round_trip_of_labels_only(tmp_path):
+    data = Dataset(grid_offsets(5.0, 45.0))
+    data.save(tmp_path / "labels.npz")
+    again = Dataset.load(tmp_path / "labels.npz")
+    assert again.images is None and again.features is None and again.samples is None
+    np.testing.assert_array_equal(again.labels, data.labels)
+
+
+def test_grid_is_the_papers_3x3x7():
+    labels = grid_offsets(25.0, 45.0)
+    assert labels.shape == (63, 3)
+    assert sorted(set(labels[:, 0])) == [-25.0, 0.0, 25.0]
+    assert sorted(set(labels[:, 1])) == [-25.0, 0.0, 25.0]
+    np.testing.assert_allclose(sorted(set(labels[:, 2])), np.linspace(-45.0, 45.0, 7))
+    np.testing.assert_allclose(labels[:7, 2], np.linspace(-45.0, 45.0, 7))  # dphi fastest
+    assert grid_offsets(5.0, 10.0, (1, 2, 1)).tolist() == [[0.0, -5.0, 0.0], [0.0, 5.0, 0.0]]
+    with pytest.raises(DatasetError, match="grid"):
+        grid_offsets(-1.0, 10.0)
+
+
+def test_random_offsets_are_in_range_and_seeded():
+    a = random_offsets(np.random.default_rng(3), 500, 5.0, 45.0)
+    b = random_offsets(np.random.default_rng(3), 500, 5.0, 45.0)
+    np.testing.assert_array_equal(a, b)
+    assert a.shape == (500, 3)
+    assert np.abs(a[:, :2]).max() <= 5.0 and np.abs(a[:, 2]).max() <= 45.0
+    assert np.abs(a[:, 2]).max() > 40.0
+    with pytest.raises(DatasetError, match="random offsets"):
+        random_offsets(np.random.default_rng(3), 0, 5.0, 45.0)
+
+
+def test_inconsistent_contents_are_refused():
+    with pytest.raises(DatasetError, match="labels"):
+        Dataset(np.zeros((4, 2)))
+    with pytest.raises(DatasetError, match="images"):
+        Dataset(np.zeros((4, 3)), images=np.zeros((3, 6, 8, 3), np.uint8))
+    with pytest.raises(DatasetError, match="images"):
+        Dataset(np.zeros((4, 3)), images=np.zeros((4, 6, 8, 3), np.float32))
+    with pytest.raises(DatasetError, match="samples"):
+        Dataset(np.zeros((4, 3)), samples=[{}])
+    with pytest.raises(DatasetError, match="labels"):
+        Dataset(np.full((2, 3), np.inf))
+
+
+def test_unserialisable_metadata_is_refused_and_nothing_written(tmp_path):
+    with pytest.raises(DatasetError, match="JSON"):
+        Dataset(np.zeros((1, 3)), metadata={"when": object()}).save(tmp_path / "x.npz")
+    assert list(tmp_path.iterdir()) == []
+
+
+def corrupt_files(good: bytes) -> dict[str, bytes]:
+    flipped = bytearray(good)
+    flipped[len(good) // 2] ^= 0xFF
+    pickled = io.BytesIO()
+    np.savez(pickled, labels=np.array([{"evil": 1}], dtype=object),
+             metadata_json=np.frombuffer(b"{}", np.uint8))
+    wrong_version = io.BytesIO()
+    meta = json.dumps({"format": "finepos-dataset", "version": 99, "metadata": {}})
+    np.savez(wrong_version, labels=np.zeros((1, 3)),
+             metadata_json=np.frombuffer(meta.encode(), np.uint8))
+    return {"truncated": good[: len(good) // 2], "flipped": bytes(flipped), "empty": b"",
+            "garbage": b"not a dataset at all", "pickled": pickled.getvalue(),
+            "wrong_version": wrong_version.getvalue()}
+
+
+def test_corrupt_truncated_pickled_or_foreign_files_are_refused(tmp_path):
+    path = tmp_path / "set.npz"
+    sample_set().save(path)
+    for name, data in corrupt_files(path.read_bytes()).items():
+        bad = tmp_path / f"{name}.npz"
+        bad.write_bytes(data)
+        with pytest.raises(DatasetError, match=bad.name):
+            Dataset.load(bad)
+    with pytest.raises(DatasetError, match="version 99"):
+        Dataset.load(tmp_path / "wrong_version.npz")
+    with pytest.raises(DatasetError, match="cannot read"):
+        Dataset.load(tmp_path / "missing.npz")
