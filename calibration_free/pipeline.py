@@ -20,7 +20,6 @@ from calibration_free.dataset import Dataset
 from calibration_free.errors import ImageError, TrainingError
 from calibration_free.gabor import GaborBank, GaborConfig
 from calibration_free.localise import (
-    AREA_TOLERANCE,
     Localisation,
     Polarity,
     localise,
@@ -41,6 +40,8 @@ NN1_EPOCHS = 2000
 NN2_EPOCHS = 400
 # A blob covering more of the image than this is the background, not the object.
 MAX_OBJECT_FRACTION = 0.5
+# Margin added to the relative half-range of the training areas (see _prepare).
+AREA_MARGIN = 0.2
 # Otsu's threshold is computed on every OTSU_STRIDE-th pixel along each axis.
 OTSU_STRIDE = 2
 
@@ -194,6 +195,7 @@ class _Prepared:
     intensity: IntensityStats
     threshold: float
     expected_area_px: float
+    area_tolerance: float
     normalised: dict[str, list[np.ndarray]]
     found: dict[str, list[Localisation]]
     usable: dict[str, np.ndarray]
@@ -218,15 +220,21 @@ def _prepare(sets: dict[str, Dataset], polarity: Polarity, image_area_px: int) -
     def find(name: str, area: float | None) -> list[Localisation]:
         return [localise(n, threshold, area, polarity=polarity) for n in normalised[name]]
 
-    areas = [loc.area_px for loc in find("nn2", None) if loc.ok]
-    if not areas:
-        raise TrainingError("nn2: the object was found in none of the images")
-    expected_area = float(np.median(areas))
-    if expected_area > MAX_OBJECT_FRACTION * image_area_px:
-        raise TrainingError(f"the 'object' covers {expected_area / image_area_px:.0%} of the "
+    # The blob's area changes with the displacement (the camera looks at a tilt: nearer is
+    # bigger), so the accepted window spans every training image's area, plus a margin.
+    areas = np.array([loc.area_px for name in sets for loc in find(name, None) if loc.ok])
+    if areas.size == 0:
+        raise TrainingError("the object was found in none of the training images")
+    lo, hi = float(areas.min()), float(areas.max())
+    if hi > MAX_OBJECT_FRACTION * image_area_px:
+        raise TrainingError(f"the 'object' covers {hi / image_area_px:.0%} of the "
                             f"image: it is the table; check the polarity ({polarity!r})")
-    found = {name: find(name, expected_area) for name in sets}
-    return _Prepared(intensity, threshold, expected_area, normalised, found,
+    expected_area = (lo + hi) / 2.0
+    tolerance = min(1.0, (hi - lo) / (hi + lo) + AREA_MARGIN)
+    found = {name: [localise(n, threshold, expected_area, polarity=polarity,
+                             area_tolerance=tolerance) for n in normalised[name]]
+             for name in sets}
+    return _Prepared(intensity, threshold, expected_area, tolerance, normalised, found,
                      {name: _usable(found[name], name) for name in sets})
 
 
@@ -328,5 +336,5 @@ def train_bundle(nn1_data: Dataset, nn2_data: Dataset, *, object_kind: str, kapp
     return ModelBundle(object_kind=object_kind, kappa=kappa, nominal_pose=pose.as_dict(),
                        frame_height_px=height, frame_width_px=width,
                        intensity=prep.intensity, threshold=prep.threshold, polarity=polarity,
-                       expected_area_px=prep.expected_area_px, area_tolerance=AREA_TOLERANCE,
+                       expected_area_px=prep.expected_area_px, area_tolerance=prep.area_tolerance,
                        gabor=gabor, nn1=nn1.model, nn2=nn2.model, training=training)

@@ -14,6 +14,9 @@ import sys
 from drivers.errors import FineposError
 
 COMMAND_MODULES = (
+    "controller.commands.workflow",
+    "controller.commands.evaluate",
+    "controller.commands.demo",
     "controller.commands.sim",
     "controller.commands.bench",
 )

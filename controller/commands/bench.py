@@ -3,6 +3,7 @@
 from controller.commands.leaves import register_group
 
 LEAVES = {
+    "val": "sim_backend.val_emulator.bench",
     "sim": "sim_backend.bench",
     "perception": "calibration_free.bench",
 }

@@ -3,6 +3,7 @@
 from controller.commands.leaves import register_group
 
 LEAVES = {
+    "val-emulator": "sim_backend.val_emulator.command",
     "snapshot": "sim_backend.snapshot",
 }
 

@@ -1,0 +1,64 @@
+"""Options and helpers shared by the workflow commands."""
+
+from __future__ import annotations
+
+import argparse
+import contextlib
+import json
+import sys
+import time
+from pathlib import Path
+
+from controller.config import load_config
+from controller.iteration_log import IterationLog
+from drivers.errors import ConfigError
+from drivers.files import atomic_write_text
+
+
+def add_config_option(parser: argparse.ArgumentParser) -> None:
+    parser.add_argument("--config", metavar="FILE",
+                        help="finepos YAML config (default: the simulated cell, all defaults)")
+    parser.add_argument("--state-dir", metavar="DIR",
+                        help="override controller.paths.state_dir (teach-in, datasets, models)")
+
+
+def add_log_option(parser: argparse.ArgumentParser) -> None:
+    parser.add_argument("--log", metavar="FILE",
+                        help="per-iteration JSON Lines log (default: a new file in "
+                             "controller.paths.log_dir)")
+
+
+def config_from_args(args):
+    return load_config(getattr(args, "config", None))
+
+
+@contextlib.contextmanager
+def iteration_log(args, config):
+    path = getattr(args, "log", None)
+    if path is None:
+        stamp = time.strftime("%Y%m%d-%H%M%S")
+        path = Path(config.controller.paths.log_dir) / f"iterations-{stamp}.jsonl"
+    with IterationLog(path) as log:
+        print(f"iteration log: {path}", file=sys.stderr)
+        yield log
+
+
+def parse_triple(text: str, what: str) -> tuple[float, float, float]:
+    """Parse ``DX,DY,DPHI`` (three finite numbers) or raise ConfigError naming ``what``."""
+    parts = text.split(",")
+    try:
+        values = tuple(float(p) for p in parts)
+    except ValueError:
+        values = ()
+    if len(values) != 3 or not all(abs(v) < 1e6 for v in values):
+        raise ConfigError(f"{what}: expected three numbers DX,DY,DPHI (mm, mm, deg), "
+                          f"got {text!r}")
+    return values  # type: ignore[return-value]
+
+
+def write_json(path: str | Path | None, data: dict) -> None:
+    """Print ``data`` as JSON and, when a path is given, write it there atomically."""
+    text = json.dumps(data, indent=2)
+    print(text)
+    if path:
+        atomic_write_text(path, text + "\n")

@@ -1,0 +1,87 @@
+"""``finepos demo``: the whole job on the simulated cell, from nothing, with a report."""
+
+from __future__ import annotations
+
+import argparse
+import json
+import sys
+import tempfile
+import time
+from pathlib import Path
+
+from controller.commands.common import add_config_option, config_from_args
+from controller.evaluation import run_trials, train_on_default_scene, with_lighting
+from controller.metrics import summarise
+from controller.iteration_log import IterationLog
+from controller.plots import plot_convergence
+from drivers.files import atomic_write_text
+
+LIGHTINGS = ("good", "poor")
+
+
+def table_markdown(reports: dict[str, dict]) -> str:
+    budgets = ("0.5", "1.0", "1.5", "2.5", "3.5", "6.5")
+    lines = ["| lighting | loops | x RMS [mm] | y RMS [mm] | phi RMS [deg] | safe |",
+             "|---|---|---|---|---|---|"]
+    for lighting, r in reports.items():
+        for b in budgets:
+            rms = r["rms"][b]
+            safe = r["safe_rate"].get(b)
+            safe_txt = f"{safe * 100:.0f}%" if safe is not None else ""
+            lines.append(f"| {lighting} | {b} | {rms['x_mm']:.3f} | {rms['y_mm']:.3f} | "
+                         f"{rms['phi_deg']:.2f} | {safe_txt} |")
+    lines.append("")
+    for lighting, r in reports.items():
+        lts = r["loops_to_safe"]
+        lines.append(f"- {lighting} light: loops to a safe grasp median {lts['median']}, "
+                     f"p95 {lts['p95']}; grasp success {r['grasp_success_rate'] * 100:.0f}%; "
+                     f"{r['seconds_per_loop'] * 1e3:.1f} ms per loop")
+    return "\n".join(lines) + "\n"
+
+
+def cmd_demo(args) -> int:
+    config = config_from_args(args)
+    out = Path(args.out)
+    out.mkdir(parents=True, exist_ok=True)
+    t0 = time.perf_counter()
+    with tempfile.TemporaryDirectory(prefix="finepos-demo-") as tmp:
+        print("teach-in (auto), acquisition of 2 x 63 images, training ...", file=sys.stderr)
+        model, acq = train_on_default_scene("gabor", config, Path(tmp) / "train", args.seed)
+        model.model.save(out / "model-gabor.fpm")
+        reports, curves = {}, {}
+        with IterationLog(out / "iterations.jsonl") as log:
+            for i, lighting in enumerate(LIGHTINGS):
+                run = run_trials("gabor", model, with_lighting(config, lighting), args.trials,
+                                 args.seed + i, work_dir=Path(tmp) / lighting, log=log)
+                r = summarise(run["states"])
+                r["grasp_success_rate"] = sum(run["grasps"]) / len(run["grasps"])
+                times = sorted(run["seconds_per_iteration"])
+                r["seconds_per_loop"] = times[len(times) // 2]
+                reports[lighting] = r
+                curves[f"{lighting} light"] = run["states"]
+    summary = {"train_images": model.train_images, "train_seconds": model.train_seconds,
+               "acquire_seconds": acq["acquire_seconds"], "trials": args.trials,
+               "seconds_total": time.perf_counter() - t0, "results": reports}
+    atomic_write_text(out / "report.json", json.dumps(summary, indent=2) + "\n")
+    table = table_markdown(reports)
+    atomic_write_text(out / "table.md", table)
+    plot = plot_convergence(curves, out / "convergence.png")
+    print(table)
+    print(f"report: {out / 'report.json'}\ntable:  {out / 'table.md'}\nplot:   {plot}\n"
+          f"log:    {out / 'iterations.jsonl'}\nmodel:  {out / 'model-gabor.fpm'}\n"
+          f"total {summary['seconds_total']:.0f} s")
+    return 0
+
+
+def register(subparsers) -> None:
+    p = subparsers.add_parser(
+        "demo", help="the whole job on the simulated cell: teach, acquire, train, evaluate",
+        description="Example: finepos demo --out out/demo\n\nAuto-teach, acquire the NN1 and "
+                    "NN2 grids, train, then position and grasp 50 random placements in good "
+                    "and in poor light; writes a table, a convergence plot and the logs.",
+        formatter_class=argparse.RawDescriptionHelpFormatter)
+    add_config_option(p)
+    p.add_argument("--out", default="out/demo", help="output folder")
+    p.add_argument("--trials", type=int, default=50, help="placements per lighting")
+    p.add_argument("--seed", type=int, default=1)
+    p.set_defaults(func=cmd_demo)

@@ -1,0 +1,152 @@
+"""``finepos teach | acquire | train | position | grasp``: the cell's workflow, step by step."""
+
+from __future__ import annotations
+
+import argparse
+
+from controller.commands.common import (
+    add_config_option,
+    add_log_option,
+    config_from_args,
+    iteration_log,
+    parse_triple,
+    write_json,
+)
+from controller.devices import open_devices
+from controller.fine_positioner import DATASETS, FinePositioner
+from controller.systems import SYSTEMS
+from drivers.errors import FineposError
+from drivers.pose import ToolStep
+
+
+def _positioner(args, devices, config, log=None) -> FinePositioner:
+    return FinePositioner(devices, config, log=log, state_dir=args.state_dir)
+
+
+def cmd_teach(args) -> int:
+    config = config_from_args(args)
+    with open_devices(config) as devices:
+        fp = _positioner(args, devices, config)
+        if args.auto:
+            state = fp.teach_auto()
+        elif args.device == "spacenav":
+            from controller.teach_spacenav import teach_with_spacenav
+
+            state = teach_with_spacenav(fp, args)
+        else:
+            state = fp.teach("current", args.grasp_depth_mm, args.object_width_mm)
+    write_json(None, {"state_file": str(fp.state_path), "nominal_pose":
+                      state.nominal_pose.as_dict(), "object": state.object_kind,
+                      "kappa": state.kappa, "source": state.source})
+    return 0
+
+
+def cmd_acquire(args) -> int:
+    config = config_from_args(args)
+    with open_devices(config) as devices:
+        fp = _positioner(args, devices, config)
+        data = fp.acquire(args.set, seed=args.seed)
+    write_json(None, {"set": args.set, "images": len(data),
+                      "file": str(fp.dataset_path(args.set)),
+                      "seconds": data.metadata.get("seconds")})
+    return 0
+
+
+def cmd_train(args) -> int:
+    config = config_from_args(args)
+    fp = FinePositioner(None, config, state_dir=args.state_dir)
+    model = fp.train(args.system)
+    write_json(None, {"system": args.system, "model": str(fp.model_path(args.system)),
+                      "train_images": model.train_images,
+                      "train_seconds": round(model.train_seconds, 3)})
+    return 0
+
+
+def cmd_position(args) -> int:
+    config = config_from_args(args)
+    with open_devices(config) as devices, iteration_log(args, config) as log:
+        fp = _positioner(args, devices, config, log)
+        fp.load_model(args.model, args.system)
+        if devices.cell is not None and args.offset is not None:
+            dx, dy, dphi = parse_triple(args.offset, "--offset")
+            fp.move_to(fp.state().nominal_pose.moved_in_tool_frame(
+                ToolStep(-dx, -dy, 0.0, -dphi)))
+        elif args.offset is not None:
+            raise FineposError("--offset places the simulated arm; on a real cell the loop "
+                               "starts where the coarse approach left the arm")
+        result = fp.position(args.max_loops)
+        report = {"run_id": result.run_id, "outcome": result.outcome, "reason": result.reason,
+                  "loops": result.loops, "iterations": result.iterations,
+                  "error": result.states[-1].error, "log": str(log.path)}
+        if args.grasp and result.ok:
+            report["grasp"] = fp.grasp().as_dict()
+    write_json(None, report)
+    return 0 if result.ok else 1
+
+
+def cmd_grasp(args) -> int:
+    config = config_from_args(args)
+    with open_devices(config) as devices:
+        result = _positioner(args, devices, config).grasp()
+    write_json(None, result.as_dict())
+    return 0 if result.success else 1
+
+
+def register(subparsers) -> None:
+    p = subparsers.add_parser(
+        "teach", help="record the nominal grasp pose into the cell's state file",
+        description="Example: finepos teach --auto\n\nRecord the nominal pre-grasp pose. "
+                    "--auto (simulated cell): place the gripper at the part's true grasp "
+                    "pose; --device spacenav: jog with the 3D mouse, a button records; "
+                    "otherwise the arm's current pose is recorded.",
+        formatter_class=argparse.RawDescriptionHelpFormatter)
+    add_config_option(p)
+    how = p.add_mutually_exclusive_group()
+    how.add_argument("--auto", action="store_true", help="simulated cell: the true pose")
+    how.add_argument("--device", choices=["spacenav"], help="jog with a 3D mouse")
+    p.add_argument("--grasp-depth-mm", type=float, help="descent from the pose to grip")
+    p.add_argument("--object-width-mm", type=float, help="finger width when holding the part")
+    p.set_defaults(func=cmd_teach)
+
+    p = subparsers.add_parser(
+        "acquire", help="take the training or test images around the taught pose",
+        description="Example: finepos acquire --set nn1\n\nDrive the grid of displacements "
+                    "(nn1: a = 25 mm, nn2: a = 5 mm, b = 180/kappa deg, 3x3x7) or a random "
+                    "test set, and store the dataset under the state folder.",
+        formatter_class=argparse.RawDescriptionHelpFormatter)
+    add_config_option(p)
+    p.add_argument("--set", required=True, choices=DATASETS)
+    p.add_argument("--seed", type=int, default=0, help="seed of the random test set")
+    p.set_defaults(func=cmd_acquire)
+
+    p = subparsers.add_parser(
+        "train", help="train NN1 and NN2 into a model bundle",
+        description="Example: finepos train\n\nTrain the system from the nn1 and nn2 "
+                    "datasets into state/model-<system>.",
+        formatter_class=argparse.RawDescriptionHelpFormatter)
+    add_config_option(p)
+    p.add_argument("--system", default="gabor", choices=sorted(SYSTEMS))
+    p.set_defaults(func=cmd_train)
+
+    p = subparsers.add_parser(
+        "position", help="run the fine-positioning loop (and optionally grasp)",
+        description="Example: finepos position --offset 12,-8,20 --grasp\n\nRun the half/full "
+                    "loop from where the arm is; on the simulated cell --offset first "
+                    "displaces the arm from the taught pose (mm, mm, deg).",
+        formatter_class=argparse.RawDescriptionHelpFormatter)
+    add_config_option(p)
+    add_log_option(p)
+    p.add_argument("--system", default="gabor", choices=sorted(SYSTEMS))
+    p.add_argument("--model", metavar="FILE", help="model file (default: the state folder's)")
+    p.add_argument("--offset", metavar="DX,DY,DPHI", help="simulated cell: start offset")
+    p.add_argument("--max-loops", type=float, help="loop budget (default from config)")
+    p.add_argument("--grasp", action="store_true", help="grasp after converging")
+    p.set_defaults(func=cmd_position)
+
+    p = subparsers.add_parser(
+        "grasp", help="force-guarded grasp from the current pose",
+        description="Example: finepos grasp\n\nDescend with the wrist sensor guarding, close, "
+                    "verify the grip, lift.",
+        formatter_class=argparse.RawDescriptionHelpFormatter)
+    add_config_option(p)
+    p.set_defaults(func=cmd_grasp)

@@ -1,0 +1,128 @@
+"""The root configuration file (``finepos.yaml``): every section, strictly typed.
+
+Sections: ``arm``, ``camera``, ``wrench`` (backend ``type`` plus that backend's options, see
+``controller.devices``), ``scene`` (the simulated cell), ``safety``, ``perception``,
+``controller``. Unknown keys, wrong types and out-of-range values fail at load with the full
+key path. With no file, every default applies: the simulated cell, good light, the cube.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+from calibration_free.gabor import GaborConfig
+from calibration_free.pipeline import NN2_HIDDEN
+from controller.grasp import GraspConfig
+from controller.positioning import LoopConfig
+from drivers.errors import ConfigError
+from drivers.safety import SafetyLimits
+from drivers.typed_config import from_mapping, load_yaml_file
+from sim_backend.scene_config import SceneConfig
+
+
+@dataclass(frozen=True)
+class GridConfig:
+    """One acquisition grid: displacements in [-a, a] x [-a, a] x [-b, b] on ``shape`` points.
+
+    b_deg: None means 180/kappa (the object's whole symmetry period).
+    """
+
+    a_mm: float = field(default=25.0, metadata={"min": 0.0})
+    b_deg: float | None = field(default=None, metadata={"min": 0.0})
+    shape: tuple[int, int, int] = field(default=(3, 3, 7), metadata={"min": 1})
+
+
+@dataclass(frozen=True)
+class AcquisitionConfig:
+    """Config section ``controller.acquisition``: the NN1 and NN2 training grids (paper
+    defaults) and the random test set."""
+
+    nn1: GridConfig = GridConfig(a_mm=25.0)
+    nn2: GridConfig = GridConfig(a_mm=5.0)
+    test_count: int = field(default=50, metadata={"min": 1})
+
+
+@dataclass(frozen=True)
+class PathsConfig:
+    """Config section ``controller.paths``: where state, datasets, models and logs go."""
+
+    state_dir: str = "state"
+    log_dir: str = "runs"
+
+
+@dataclass(frozen=True)
+class ControllerConfig:
+    loop: LoopConfig = LoopConfig()
+    grasp: GraspConfig = GraspConfig()
+    acquisition: AcquisitionConfig = AcquisitionConfig()
+    paths: PathsConfig = PathsConfig()
+
+
+@dataclass(frozen=True)
+class PerceptionConfig:
+    """Config section ``perception``: the Gabor filter bank and the networks.
+
+    nn2_hidden: hidden layer sizes of NN2 (NN1 is the paper's 2-3-2); seed: training seed;
+    nn1_uses_nn2_set: also train NN1 on the NN2 grid's images (they cost no extra motion and
+    make NN1 precise near the nominal pose, where the loop's fixed point is).
+    """
+
+    gabor: GaborConfig = GaborConfig()
+    nn2_hidden: tuple[int, ...] = field(default=NN2_HIDDEN, metadata={"min": 1})
+    seed: int = 0
+    nn1_uses_nn2_set: bool = True
+
+
+@dataclass(frozen=True)
+class DeviceSection:
+    """A device backend chosen by ``type`` with that backend's typed options."""
+
+    type: str
+    options: Any
+
+
+@dataclass(frozen=True)
+class FineposConfig:
+    arm: DeviceSection
+    camera: DeviceSection
+    wrench: DeviceSection
+    scene: SceneConfig = SceneConfig()
+    safety: SafetyLimits = SafetyLimits()
+    perception: PerceptionConfig = PerceptionConfig()
+    controller: ControllerConfig = ControllerConfig()
+    source: str = "<defaults>"
+
+
+SECTIONS = ("arm", "camera", "wrench", "scene", "safety", "perception", "controller")
+
+
+def config_from_mapping(data: dict[str, Any], source: str = "<mapping>") -> FineposConfig:
+    """Validate a whole root mapping (e.g. parsed YAML) into a FineposConfig."""
+    from controller.devices import parse_device_section
+
+    unknown = sorted(str(k) for k in data if k not in SECTIONS)
+    if unknown:
+        raise ConfigError(f"{unknown[0]}: unknown section (allowed: {', '.join(SECTIONS)})")
+    return FineposConfig(
+        arm=parse_device_section("arm", data.get("arm")),
+        camera=parse_device_section("camera", data.get("camera")),
+        wrench=parse_device_section("wrench", data.get("wrench")),
+        scene=from_mapping(SceneConfig, data.get("scene"), "scene"),
+        safety=from_mapping(SafetyLimits, data.get("safety"), "safety"),
+        perception=from_mapping(PerceptionConfig, data.get("perception"), "perception"),
+        controller=from_mapping(ControllerConfig, data.get("controller"), "controller"),
+        source=source,
+    )
+
+
+def load_config(path: str | Path | None) -> FineposConfig:
+    """Load ``path`` (None: all defaults). Raises ConfigError naming the bad key."""
+    if path is None:
+        return config_from_mapping({}, "<defaults>")
+    try:
+        return config_from_mapping(load_yaml_file(path), str(path))
+    except ConfigError as exc:
+        msg = str(exc)
+        raise ConfigError(msg if msg.startswith(str(path)) else f"{path}: {msg}") from exc

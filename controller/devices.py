@@ -1,0 +1,146 @@
+"""Device backends by configuration: one explicit registry per device kind.
+
+``arm: {type: sim}`` or ``arm: {type: val, port: /dev/ttyS0, ...}``: ``type`` picks the
+backend, the other keys are that backend's options, checked strictly at load. ``open_devices``
+builds the configured arm, camera and wrench sensor (sharing one simulated cell where any of
+them is simulated) and closes everything it opened, in reverse order.
+"""
+
+from __future__ import annotations
+
+import contextlib
+from collections.abc import Callable
+from dataclasses import dataclass
+from typing import Any
+
+from drivers.errors import ConfigError
+from drivers.interfaces import Arm, Camera, WrenchSensor
+from drivers.typed_config import from_mapping
+from drivers.val.config import ValConfig
+from sim_backend.scene_config import SimArmConfig
+
+
+@dataclass(frozen=True)
+class NoOptions:
+    """A backend without options of its own."""
+
+
+@dataclass(frozen=True)
+class Backend:
+    options: type
+    build: Callable[[Any, Any], Any]  # (options, DeviceContext) -> device
+
+
+class DeviceContext:
+    """What builders share: the root config, and the simulated cell once one is needed."""
+
+    def __init__(self, config, seed: int = 0) -> None:
+        self.config = config
+        self.seed = seed
+        self._cell = None
+        self._stack = contextlib.ExitStack()
+
+    @property
+    def cell(self):
+        """The simulated work cell (created on first use)."""
+        if self._cell is None:
+            from sim_backend.cell import SimCell
+
+            arm_opts = (self.config.arm.options if self.config.arm.type == "sim"
+                        else SimArmConfig())
+            self._cell = self._stack.enter_context(
+                SimCell(self.config.scene, arm_opts, seed=self.seed))
+        return self._cell
+
+    @property
+    def has_cell(self) -> bool:
+        return self._cell is not None
+
+    def close(self) -> None:
+        self._stack.close()
+
+
+def _sim_arm(options, ctx: DeviceContext) -> Arm:
+    from sim_backend.devices import SimArm
+
+    return SimArm(ctx.cell, ctx.config.safety)
+
+
+def _val_arm(options, ctx: DeviceContext) -> Arm:
+    from drivers.val import ValArm
+
+    return ValArm(options, ctx.config.safety)
+
+
+def _sim_camera(options, ctx: DeviceContext) -> Camera:
+    from sim_backend.devices import SimCamera
+
+    return SimCamera(ctx.cell)
+
+
+def _sim_wrench(options, ctx: DeviceContext) -> WrenchSensor:
+    from sim_backend.devices import SimWrenchSensor
+
+    return SimWrenchSensor(ctx.cell)
+
+
+ARM_BACKENDS: dict[str, Backend] = {
+    "sim": Backend(SimArmConfig, _sim_arm),
+    "val": Backend(ValConfig, _val_arm),
+}
+CAMERA_BACKENDS: dict[str, Backend] = {
+    "sim": Backend(NoOptions, _sim_camera),
+}
+WRENCH_BACKENDS: dict[str, Backend] = {
+    "sim": Backend(NoOptions, _sim_wrench),
+}
+REGISTRIES = {"arm": ARM_BACKENDS, "camera": CAMERA_BACKENDS, "wrench": WRENCH_BACKENDS}
+
+
+def parse_device_section(kind: str, data: Any):
+    """Validate ``{type: ..., <options>}`` for device ``kind`` (default: ``type: sim``)."""
+    from controller.config import DeviceSection
+
+    registry = REGISTRIES[kind]
+    data = {"type": "sim"} if data is None else data
+    if not isinstance(data, dict):
+        raise ConfigError(f"{kind}: expected a mapping with a 'type' key, got {data!r}")
+    options = dict(data)
+    backend_type = options.pop("type", "sim")
+    if backend_type not in registry:
+        raise ConfigError(f"{kind}.type: must be one of {' | '.join(registry)}, "
+                          f"got {backend_type!r}")
+    backend = registry[backend_type]
+    return DeviceSection(backend_type, from_mapping(backend.options, options, kind))
+
+
+@dataclass
+class CellDevices:
+    """The opened devices, and the simulated cell when the config uses one (else None)."""
+
+    arm: Arm
+    camera: Camera
+    wrench: WrenchSensor
+    cell: Any
+
+    def ground_truth(self):
+        """The gripper's error against the part's grasp pose, where the backend knows it."""
+        return self.cell.ground_truth_error() if self.cell is not None else None
+
+
+@contextlib.contextmanager
+def open_devices(config, seed: int = 0, activate: bool = True):
+    """Build, connect (and activate) the configured devices; close them all on exit."""
+    ctx = DeviceContext(config, seed)
+    with contextlib.ExitStack() as stack:
+        stack.callback(ctx.close)
+        built = []
+        for kind in ("arm", "camera", "wrench"):
+            section = getattr(config, kind)
+            device = REGISTRIES[kind][section.type].build(section.options, ctx)
+            stack.callback(device.disconnect)
+            device.connect()
+            if activate:
+                device.activate()
+            built.append(device)
+        yield CellDevices(*built, cell=ctx._cell)

@@ -1,0 +1,154 @@
+"""The PUMA 260 arm behind a VAL II controller, driven over its RS-232 monitor terminal.
+
+Start-up: wake the monitor with a bare line ending, answer the boot questions from the config,
+wait for the ``.`` prompt. Then ``where`` reads the pose, ``speed`` sets the monitor speed and
+``do move trans(...)`` moves to absolute targets (the Arm base class turns relative tool moves
+into absolute targets from a fresh ``where``). Moves block until the prompt returns.
+
+Errors, by cause:
+- controller error ``*text*`` whose text is listed in ``rejection_errors``: MotionRejectedError
+  (nothing moved; the arm stays usable);
+- any other controller error, or a program HOLD: DeviceFaultError carrying the message;
+- no complete reply within the timeout: DeviceTimeoutError;
+- line noise, a missing echo, an unexpected question or output: ProtocolError;
+- a broken link: DeviceFaultError.
+After a command, all but the first put the arm into FAULT: it refuses motion until ``reset()``
+reconnects. During ``connect()`` they are raised and the arm stays disconnected.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import logging
+from collections.abc import Iterator
+
+from drivers.errors import DeviceFaultError, DeviceTimeoutError, MotionRejectedError, ProtocolError
+from drivers.interfaces import Arm
+from drivers.pose import Pose
+from drivers.safety import SafetyLimits
+from drivers.val.config import ValConfig
+from drivers.val.link import ValLink
+from drivers.val.replies import Reply, ReplyKind
+from drivers.val.where import WhereReading, parse_where
+
+logger = logging.getLogger(__name__)
+
+# Questions answered in one start-up before giving up (the controller keeps asking).
+_MAX_BOOT_QUESTIONS = 8
+
+
+class ValArm(Arm):
+    """Arm interface over the VAL II monitor. ``link`` exposes byte counters (benchmarks)."""
+
+    def __init__(self, config: ValConfig, limits: SafetyLimits | None = None) -> None:
+        super().__init__(limits)
+        self.config = config
+        self.link = ValLink(config)
+        # VAL reports no finger width: the nominal width of the last gripper command.
+        self._gripper_closed = False
+
+    # -- lifecycle -------------------------------------------------------------------------
+    def _open(self) -> None:
+        self.link.open()
+        try:
+            self._handshake()
+        except BaseException:
+            self.link.close()
+            raise
+
+    def _close(self) -> None:
+        self.link.close()
+
+    def _handshake(self) -> None:
+        timeout_s = self.config.exchange_timeout_s
+        reply = self.link.exchange("", timeout_s, echo=False)
+        for _ in range(_MAX_BOOT_QUESTIONS):
+            if reply.kind is not ReplyKind.QUESTION:
+                self._check(reply, "<wake>")
+                logger.info("VAL monitor ready on %s", self.config.port)
+                return
+            answer = self._boot_answer(reply.message)
+            logger.info("VAL start-up: %r -> %r", reply.message, answer)
+            reply = self.link.exchange(answer, timeout_s, echo=False)
+        raise ProtocolError(f"VAL start-up: still asking after {_MAX_BOOT_QUESTIONS} answers: "
+                            f"{reply.message!r}")
+
+    def _boot_answer(self, question: str) -> str:
+        for pattern, answer in self.config.boot_answers.items():
+            if pattern.casefold() in question.casefold():
+                return answer
+        raise ProtocolError(f"VAL start-up: unexpected question {question!r} (add it to "
+                            "boot_answers to answer it)")
+
+    # -- exchanges -------------------------------------------------------------------------
+    @contextlib.contextmanager
+    def _faulting(self, line: str) -> Iterator[None]:
+        """Put the arm into FAULT when the exchange for ``line`` fails (not when refused)."""
+        try:
+            yield
+        except (DeviceTimeoutError, ProtocolError, DeviceFaultError) as exc:
+            self.mark_fault(f"{line!r}: {exc}")
+            raise
+
+    def _command(self, line: str, timeout_s: float | None = None) -> Reply:
+        """Send one command and return its OK reply."""
+        reply = self.link.exchange(line, timeout_s or self.config.exchange_timeout_s,
+                                   echo=self.config.echo)
+        return self._check(reply, line)
+
+    def _check(self, reply: Reply, line: str) -> Reply:
+        """Return an OK reply; raise the typed error for every other kind."""
+        if reply.kind is ReplyKind.OK:
+            return reply
+        if reply.kind is ReplyKind.ERROR:
+            message = reply.message.casefold()
+            if any(text.casefold() in message for text in self.config.rejection_errors):
+                logger.warning("VAL refused %r: %s", line, reply.message)
+                raise MotionRejectedError(reply.message)
+            raise DeviceFaultError(reply.message)
+        if reply.kind is ReplyKind.HOLD:
+            raise DeviceFaultError(reply.message)
+        raise ProtocolError(f"VAL: unexpected {reply.kind.value} after {line!r}: "
+                            f"{reply.message!r}")
+
+    def _command_without_output(self, line: str, timeout_s: float | None = None) -> None:
+        with self._faulting(line):
+            reply = self._command(line, timeout_s)
+            if reply.lines:
+                raise ProtocolError(f"VAL: unexpected output after {line!r}: {reply.lines!r}")
+
+    # -- public extras -----------------------------------------------------------------------
+    def where(self) -> WhereReading:
+        """Pose and, when the controller prints them, joint angles (deg)."""
+        self._require_connected()
+        return self._where()
+
+    def _where(self) -> WhereReading:
+        line = self.config.commands.where
+        with self._faulting(line):
+            return parse_where(self._command(line).lines)
+
+    # -- Arm backend -------------------------------------------------------------------------
+    def _read_pose(self) -> Pose:
+        return self._where().pose
+
+    def _move_to(self, target: Pose) -> Pose:
+        line = self.config.commands.move.format(**target.as_dict())
+        self._command_without_output(line, self.config.move_timeout_s)
+        return self._where().pose
+
+    def _set_speed(self, percent: float) -> None:
+        self._command_without_output(self.config.commands.speed.format(percent=percent))
+
+    def _halt(self) -> None:
+        self._command_without_output(self.config.commands.halt)
+
+    def _set_gripper(self, closed: bool) -> float:
+        commands = self.config.commands
+        self._command_without_output(commands.gripper_close if closed else commands.gripper_open)
+        self._gripper_closed = closed
+        return self._finger_width_mm()
+
+    def _finger_width_mm(self) -> float:
+        cfg = self.config
+        return cfg.gripper_closed_width_mm if self._gripper_closed else cfg.gripper_open_width_mm

@@ -1,0 +1,103 @@
+"""Configuration of the VAL II serial arm driver (config section ``arm`` with ``type: val``).
+
+Every command string is a template here, never hard-wired in the driver: the hardware notes
+confirm ``where``, ``speed`` and ``do move trans(...)`` on a real PUMA 260; the gripper and halt
+commands and the error texts are standard VAL II but unconfirmed, so check them on the
+controller and override them in YAML.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from typing import Literal
+
+# Values used to check that every template formats (the field names each template may use).
+_TEMPLATE_FIELDS: dict[str, dict[str, float]] = {
+    "where": {},
+    "speed": {"percent": 50.0},
+    "move": {"x_mm": 1.0, "y_mm": 2.0, "z_mm": 3.0, "o_deg": 4.0, "a_deg": 5.0, "t_deg": 6.0},
+    "gripper_open": {},
+    "gripper_close": {},
+    "halt": {},
+}
+
+
+@dataclass(frozen=True)
+class ValCommands:
+    """Command templates (``str.format`` fields in braces), sent without the line ending.
+
+    where: read the pose (confirmed). speed: monitor speed, field ``percent`` (confirmed).
+    move: absolute Cartesian move, fields ``x_mm y_mm z_mm o_deg a_deg t_deg`` (confirmed).
+    gripper_open / gripper_close / halt: unconfirmed standard VAL II.
+    """
+
+    where: str = "where"
+    speed: str = "speed {percent:g}"
+    move: str = ("do move trans({x_mm:.2f},{y_mm:.2f},{z_mm:.2f},"
+                 "{o_deg:.3f},{a_deg:.3f},{t_deg:.3f})")
+    gripper_open: str = "do openi"
+    gripper_close: str = "do closei"
+    halt: str = "abort"
+
+    def __post_init__(self) -> None:
+        for name, sample in _TEMPLATE_FIELDS.items():
+            template = getattr(self, name)
+            try:
+                text = template.format(**sample)
+            except (KeyError, IndexError, ValueError) as exc:
+                raise ValueError(f"{name}: template {template!r} does not format with the "
+                                 f"fields {sorted(sample) or 'none'}: {exc!r}") from exc
+            if not text.strip() or not text.isascii() or any(c in text for c in "\r\n"):
+                raise ValueError(f"{name}: template {template!r} must give one non-empty "
+                                 "ASCII line")
+
+
+@dataclass(frozen=True)
+class ValConfig:
+    """How to reach and talk to the VAL II monitor.
+
+    port: a ``serial.serial_for_url`` URL: a device (``/dev/ttyS0``), a pty (``/dev/pts/7``),
+        ``socket://host:port``, ``spy://...`` or ``loop://``.
+    baudrate / bytesize / parity / stopbits: the line format (PUMA 260: 9600 8N1).
+    line_ending: what ends a command (``"\\r"``; one public driver sends ``"\\n\\r"``).
+    echo: the monitor echoes each command line; a reply must start with that echo.
+    exchange_timeout_s: longest wait for the reply to one command.
+    move_timeout_s: longest wait for a motion to finish (the prompt after ``do move``).
+    boot_answers: start-up questions (matched case-insensitively as a part of the question
+        line) and the answer sent to each; any other question during start-up is an error.
+    rejection_errors: controller error texts (part of the ``*...*`` message, any case) that mean
+        "refused, nothing moved" (MotionRejectedError); every other error is a fault.
+    gripper_open_width_mm / gripper_closed_width_mm: nominal finger widths reported after
+        open/close (VAL has no finger feedback).
+    commands: the command templates.
+    """
+
+    port: str
+    baudrate: int = field(default=9600, metadata={"min": 50})
+    bytesize: Literal[5, 6, 7, 8] = 8
+    parity: Literal["N", "E", "O", "M", "S"] = "N"
+    stopbits: Literal[1, 2] = 1
+    line_ending: Literal["\r", "\n", "\r\n", "\n\r"] = "\r"
+    echo: bool = True
+    exchange_timeout_s: float = field(default=2.0, metadata={"min": 0.0, "exclusive_min": True})
+    move_timeout_s: float = field(default=60.0, metadata={"min": 0.0, "exclusive_min": True})
+    boot_answers: dict[str, str] = field(default_factory=lambda: {
+        "Load VAL from floppy": "n",
+        "Initialize": "n",
+    })
+    rejection_errors: tuple[str, ...] = ("position out of range",)
+    gripper_open_width_mm: float = field(default=40.0, metadata={"min": 0.0})
+    gripper_closed_width_mm: float = field(default=0.0, metadata={"min": 0.0})
+    commands: ValCommands = field(default_factory=ValCommands)
+
+    def __post_init__(self) -> None:
+        if not self.port.strip():
+            raise ValueError("port: must name a serial port URL, got an empty string")
+        if self.gripper_closed_width_mm >= self.gripper_open_width_mm:
+            raise ValueError("gripper_closed_width_mm must be below gripper_open_width_mm, got "
+                             f"{self.gripper_closed_width_mm} / {self.gripper_open_width_mm}")
+        for question, answer in self.boot_answers.items():
+            if not question.strip() or not answer.isascii() or any(c in answer for c in "\r\n"):
+                raise ValueError(f"boot_answers: bad entry {question!r}: {answer!r}")
+        if any(not text.strip() for text in self.rejection_errors):
+            raise ValueError("rejection_errors: entries must not be empty")

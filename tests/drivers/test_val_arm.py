@@ -1,0 +1,209 @@
+"""The VAL II arm driver against the VAL emulator over a real pty (and TCP): contract, start-up,
+port URLs, controller errors, and every fault knob: typed error, no further motion, recovery."""
+
+from __future__ import annotations
+
+import os
+
+import pytest
+
+from drivers.contract import check_arm
+from drivers.errors import (
+    DeviceFaultError,
+    DeviceTimeoutError,
+    MotionRejectedError,
+    ProtocolError,
+)
+from drivers.interfaces import Lifecycle
+from drivers.pose import Pose, ToolStep
+from drivers.safety import SafetyLimits
+from drivers.val import ValArm, ValConfig
+from sim_backend.val_emulator.server import DEFAULT_GARBAGE, ValEmulator, ValFaults
+from tests.mocks.fakes import FakeArm
+
+LIMITS = SafetyLimits(max_step_mm=20.0, max_step_deg=30.0)
+# Short enough that the timeout faults below take a fraction of a second each.
+FAULT_TIMEOUT_S = 0.5
+STEP = ToolStep(2.0, -1.0, 0.5, 3.0)
+
+
+@pytest.fixture
+def backing():
+    with FakeArm() as arm:
+        yield arm
+
+
+@pytest.fixture
+def emulator(backing):
+    with ValEmulator(backing) as emu:
+        yield emu
+
+
+def make_arm(url: str, **overrides) -> ValArm:
+    return ValArm(ValConfig(port=url, **overrides), LIMITS)
+
+
+def test_contract_over_pty(emulator):
+    check_arm(lambda: make_arm(emulator.url))
+
+
+@pytest.mark.skipif("FINEPOS_VAL_PORT" not in os.environ,
+                    reason="real-hardware test: set FINEPOS_VAL_PORT to the controller's port URL "
+                           "(the arm moves a few mm and works the gripper)")
+def test_contract_on_the_real_controller():
+    check_arm(lambda: make_arm(os.environ["FINEPOS_VAL_PORT"]))
+
+
+def test_contract_over_socket_url(backing):
+    with ValEmulator(backing, tcp_port=0) as emu:
+        assert emu.url.startswith("socket://127.0.0.1:")
+        check_arm(lambda: make_arm(emu.url))
+
+
+def test_contract_with_newline_cr_endings_and_boot_questions(backing):
+    with ValEmulator(backing, boot_questions=True) as emu:
+        check_arm(lambda: make_arm(emu.url, line_ending="\n\r"))
+
+
+def test_startup_answers_the_boot_questions(backing):
+    with ValEmulator(backing, boot_questions=True) as emu, make_arm(emu.url) as arm:
+        assert emu.lines_handled == 3  # the wake-up line and two answers
+        assert arm.pose() == backing.pose()
+
+
+def test_startup_refuses_an_unexpected_question(backing):
+    with ValEmulator(backing, boot_questions=True) as emu:
+        arm = make_arm(emu.url, boot_answers={"Load VAL from floppy": "n"})
+        with pytest.raises(ProtocolError, match="Initialize"):
+            arm.connect()
+        assert not arm.is_connected
+
+
+def test_spy_url_logs_the_traffic(emulator, tmp_path):
+    log = tmp_path / "spy.txt"
+    with make_arm(f"spy://{emulator.url}?file={log}") as arm:
+        arm.pose()
+    assert "where" in log.read_text()
+
+
+def test_loop_url_opens_but_never_sees_a_prompt():
+    arm = make_arm("loop://", exchange_timeout_s=0.2)
+    with pytest.raises(DeviceTimeoutError, match="no complete reply"):
+        arm.connect()
+    assert arm.state is Lifecycle.DISCONNECTED
+
+
+def test_commands_reach_the_controller(emulator, backing):
+    with make_arm(emulator.url) as arm:
+        arm.set_speed(25)
+        assert backing.speed_percent == 25
+        assert arm.close_gripper() == 0.0 and backing.finger_width_mm() == 0.0
+        assert arm.open_gripper() == 40.0 and backing.finger_width_mm() == 40.0
+        arm.halt()
+        assert backing.halts == 1
+        reading = arm.where()
+        assert reading.pose == backing.pose() and reading.joints_deg is not None
+
+
+def test_unreachable_pose_is_refused_without_fault():
+    workspace = SafetyLimits(workspace_min_mm=(-450, -450, 100), max_step_mm=1e4,
+                             max_step_deg=360)
+    with FakeArm(workspace) as controller_arm, ValEmulator(controller_arm) as emu, \
+            ValArm(ValConfig(port=emu.url)) as arm:  # no driver limits: the controller refuses
+        start = arm.pose()
+        below = Pose(start.x_mm, start.y_mm, 90.0, start.o_deg, start.a_deg, start.t_deg)
+        with pytest.raises(MotionRejectedError, match="Position out of range"):
+            arm.move_to(below)
+        assert arm.state is Lifecycle.ACTIVE and controller_arm.moves == []
+        arm.move_tool(STEP)
+        assert len(controller_arm.moves) == 1
+
+
+def test_forced_position_error_is_a_rejection(emulator, backing):
+    with make_arm(emulator.url) as arm:
+        emulator.set_faults(ValFaults(forced_error="Position out of range"))
+        with pytest.raises(MotionRejectedError):
+            arm.set_speed(10)
+        assert arm.state is Lifecycle.ACTIVE
+
+
+FAULTS = {
+    "reply delay": (ValFaults(reply_delay_s=30.0), DeviceTimeoutError),
+    "link dropped before the move": (ValFaults(drop_link_after_lines=1), DeviceTimeoutError),
+    "line noise": (ValFaults(garbage=DEFAULT_GARBAGE), ProtocolError),
+    "unexpected output": (ValFaults(garbage=b"NOISE\r\n"), ProtocolError),
+    "controller error": (ValFaults(forced_error="Arm power off"), DeviceFaultError),
+}
+
+
+@pytest.mark.parametrize("name", FAULTS)
+def test_fault_knob_gives_typed_error_stops_motion_and_recovers(name, emulator, backing):
+    faults, error = FAULTS[name]
+    with make_arm(emulator.url, exchange_timeout_s=FAULT_TIMEOUT_S,
+                  move_timeout_s=FAULT_TIMEOUT_S) as arm:
+        emulator.set_faults(faults)
+        with pytest.raises(error) as raised:
+            arm.move_tool(STEP)
+        if error is DeviceFaultError:
+            assert raised.value.message == "Arm power off"
+        assert arm.state is Lifecycle.FAULT and arm.fault_reason
+        moves = len(backing.moves)
+        for motion in (lambda: arm.move_tool(STEP), lambda: arm.move_to(backing.pose()),
+                       arm.open_gripper, arm.pose):
+            with pytest.raises(DeviceFaultError):
+                motion()
+        assert len(backing.moves) == moves
+
+        emulator.set_faults(ValFaults())
+        arm.reset()
+        assert arm.state is Lifecycle.INACTIVE
+        arm.activate()
+        before = arm.pose()
+        arm.move_tool(STEP)
+        assert len(backing.moves) == moves + 1
+        assert before.tool_step_to(arm.pose()).dx_mm == pytest.approx(STEP.dx_mm, abs=0.01)
+
+
+def test_reset_fails_while_the_link_is_down(emulator):
+    with make_arm(emulator.url, exchange_timeout_s=FAULT_TIMEOUT_S) as arm:
+        emulator.set_faults(ValFaults(drop_link_after_lines=0))
+        with pytest.raises(DeviceTimeoutError):
+            arm.pose()
+        with pytest.raises(DeviceTimeoutError):
+            arm.reset()
+        assert not arm.is_connected
+        emulator.set_faults(ValFaults())
+        arm.reset()
+        assert arm.is_connected
+
+
+def test_small_reply_delay_only_slows_down(emulator):
+    with make_arm(emulator.url) as arm:
+        emulator.set_faults(ValFaults(reply_delay_s=0.05))
+        arm.move_tool(STEP)
+        assert arm.state is Lifecycle.ACTIVE
+
+
+def test_dropped_tcp_link_is_a_lost_link_fault(backing):
+    with ValEmulator(backing, tcp_port=0) as emu, \
+            make_arm(emu.url, exchange_timeout_s=FAULT_TIMEOUT_S) as arm:
+        emu.set_faults(ValFaults(drop_link_after_lines=1))
+        with pytest.raises(DeviceFaultError, match="link lost"):
+            arm.move_tool(STEP)
+        assert arm.state is Lifecycle.FAULT and backing.moves == []
+        emu.set_faults(ValFaults())
+        arm.reset()
+        arm.activate()
+        arm.move_tool(STEP)
+        assert len(backing.moves) == 1
+
+
+def test_controller_error_at_startup_leaves_the_arm_disconnected(emulator):
+    emulator.set_faults(ValFaults(forced_error="Arm power off"))
+    arm = make_arm(emulator.url)
+    with pytest.raises(DeviceFaultError, match="Arm power off"):
+        arm.connect()
+    assert arm.state is Lifecycle.DISCONNECTED
+    emulator.set_faults(ValFaults())
+    with arm:
+        assert arm.pose().is_finite()

@@ -1,0 +1,1 @@
+"""Tests of the device emulators (ATI F/T controller, MJPEG camera stream, Magellan mouse)."""

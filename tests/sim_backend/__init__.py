@@ -1,0 +1,1 @@
+"""Tests of the simulated work cell (sim_backend)."""
