@@ -37,7 +37,10 @@ NN2_HIDDEN = (12,)
 # Rprop steps. NN2 stops early: on 63 images more steps start to overfit (on synthetic
 # cubes 400 steps gave ~1.0 deg RMS on random test poses, 1500 steps ~1.2 deg).
 NN1_EPOCHS = 2000
-NN2_EPOCHS = 400
+NN2_EPOCHS = 1500
+# L2 penalty on NN2's weights: 63 images cannot pin down 36 x 12 weights; without it NN2
+# reads ~0 for any rotation within a few degrees of a grid angle (see mlp.train_mlp).
+NN2_WEIGHT_DECAY = 1e-3
 # A blob covering more of the image than this is the background, not the object.
 MAX_OBJECT_FRACTION = 0.5
 # Margin added to the relative half-range of the training areas (see _prepare).
@@ -262,7 +265,8 @@ def train_bundle(nn1_data: Dataset, nn2_data: Dataset, *, object_kind: str, kapp
                  nominal_pose: Pose | Mapping[str, float], gabor: GaborConfig | None = None,
                  nn2_hidden: tuple[int, ...] = NN2_HIDDEN, seed: int = 0,
                  nn1_extra: Dataset | None = None, polarity: Polarity = "bright",
-                 nn1_epochs: int = NN1_EPOCHS, nn2_epochs: int = NN2_EPOCHS) -> ModelBundle:
+                 nn1_epochs: int = NN1_EPOCHS, nn2_epochs: int = NN2_EPOCHS,
+                 nn2_weight_decay: float = NN2_WEIGHT_DECAY) -> ModelBundle:
     """Train NN1 and NN2 from image datasets and pack everything into a ModelBundle.
 
     Steps: intensity statistics (mean of the per-image means and standard deviations of the
@@ -285,6 +289,7 @@ def train_bundle(nn1_data: Dataset, nn2_data: Dataset, *, object_kind: str, kapp
         polarity: "bright" if the object is brighter than the table after max(R, G, B).
         nn1_epochs: NN1's Rprop steps (at most).
         nn2_epochs: NN2's Rprop steps (at most).
+        nn2_weight_decay: L2 penalty on NN2's weights (0 = none).
 
     Raises:
         TrainingError: an argument is invalid, a dataset has no images or the sets' image
@@ -319,7 +324,7 @@ def train_bundle(nn1_data: Dataset, nn2_data: Dataset, *, object_kind: str, kapp
                          for i, (u, v) in zip(prep.usable["nn2"], centres("nn2"), strict=True)])
     s, c = angles.encode(nn2_data.labels[prep.usable["nn2"], 2], kappa)
     nn2 = train_mlp(features, np.stack([s, c], axis=1), tuple(nn2_hidden), seed=seed + 1,
-                    epochs=nn2_epochs)
+                    epochs=nn2_epochs, weight_decay=nn2_weight_decay)
 
     training = {
         "seed": seed,

@@ -13,7 +13,7 @@ from pathlib import Path
 from typing import Any
 
 from calibration_free.gabor import GaborConfig
-from calibration_free.pipeline import NN2_HIDDEN
+from calibration_free.pipeline import NN2_HIDDEN, NN2_WEIGHT_DECAY
 from controller.grasp import GraspConfig
 from controller.positioning import LoopConfig
 from drivers.errors import ConfigError
@@ -64,13 +64,15 @@ class ControllerConfig:
 class PerceptionConfig:
     """Config section ``perception``: the Gabor filter bank and the networks.
 
-    nn2_hidden: hidden layer sizes of NN2 (NN1 is the paper's 2-3-2); seed: training seed;
+    nn2_hidden: hidden layer sizes of NN2 (NN1 is the paper's 2-3-2); nn2_weight_decay: L2
+    penalty on NN2's weights, so it interpolates between the grid's angles; seed: training seed;
     nn1_uses_nn2_set: also train NN1 on the NN2 grid's images (they cost no extra motion and
     make NN1 precise near the nominal pose, where the loop's fixed point is).
     """
 
     gabor: GaborConfig = GaborConfig()
     nn2_hidden: tuple[int, ...] = field(default=NN2_HIDDEN, metadata={"min": 1})
+    nn2_weight_decay: float = field(default=NN2_WEIGHT_DECAY, metadata={"min": 0.0})
     seed: int = 0
     nn1_uses_nn2_set: bool = True
 

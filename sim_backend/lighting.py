@@ -40,12 +40,13 @@ def _unit(v: tuple[float, float, float]) -> tuple[float, float, float]:
 
 # Sideward lamp: low (about 25 deg above the table), from the robot's left.
 _SIDE_DIRECTION = (0.25, 1.0, 0.5)
-# Room light: mostly from above, from the far side of the table, so the gripper's own (faint)
-# shadow falls behind the part, towards the robot, rather than on it.
-_ROOM_DIRECTION = (0.6, 0.15, 1.0)
+# Room light: ceiling lamps straight above the cell, as a well-lit cell has. Light from above
+# shades the part the same way whatever its heading; a tilted key light lights one side face
+# more than the others, which moves the binarised blob by pixels as the part turns.
+_ROOM_DIRECTION = (0.0, 0.0, 1.0)
 
 PRESETS: dict[str, Light] = {
-    "good": Light(ambient=0.45, diffuse=0.55, specular=0.0, direction=_unit(_ROOM_DIRECTION),
+    "good": Light(ambient=0.5, diffuse=0.5, specular=0.0, direction=_unit(_ROOM_DIRECTION),
                   color=(1.0, 1.0, 1.0), shadow_strength=0.3),
     "dim": Light(ambient=0.2, diffuse=0.25, specular=0.0, direction=_unit(_ROOM_DIRECTION),
                  color=(1.0, 1.0, 1.0), shadow_strength=0.3),
