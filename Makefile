@@ -29,6 +29,7 @@ demo: $(STAMP)
 	$(BIN)/finepos demo --out out/demo
 
 test: $(STAMP) system-deps
+	$(BIN)/ruff check .
 	$(BIN)/python -m pytest -q
 
 test-fast: $(STAMP)

@@ -13,6 +13,8 @@ from collections.abc import Callable
 from dataclasses import dataclass
 from typing import Any
 
+from drivers.ati.config import AtiConfig
+from drivers.camera.config import OpenCvCameraConfig
 from drivers.errors import ConfigError
 from drivers.interfaces import Arm, Camera, WrenchSensor
 from drivers.typed_config import from_mapping
@@ -78,10 +80,22 @@ def _sim_camera(options, ctx: DeviceContext) -> Camera:
     return SimCamera(ctx.cell)
 
 
+def _opencv_camera(options, ctx: DeviceContext) -> Camera:
+    from drivers.camera import OpenCvCamera
+
+    return OpenCvCamera(options)
+
+
 def _sim_wrench(options, ctx: DeviceContext) -> WrenchSensor:
     from sim_backend.devices import SimWrenchSensor
 
     return SimWrenchSensor(ctx.cell)
+
+
+def _ati_wrench(options, ctx: DeviceContext) -> WrenchSensor:
+    from drivers.ati import AtiWrenchSensor
+
+    return AtiWrenchSensor(options)
 
 
 ARM_BACKENDS: dict[str, Backend] = {
@@ -90,9 +104,11 @@ ARM_BACKENDS: dict[str, Backend] = {
 }
 CAMERA_BACKENDS: dict[str, Backend] = {
     "sim": Backend(NoOptions, _sim_camera),
+    "opencv": Backend(OpenCvCameraConfig, _opencv_camera),
 }
 WRENCH_BACKENDS: dict[str, Backend] = {
     "sim": Backend(NoOptions, _sim_wrench),
+    "ati": Backend(AtiConfig, _ati_wrench),
 }
 REGISTRIES = {"arm": ARM_BACKENDS, "camera": CAMERA_BACKENDS, "wrench": WRENCH_BACKENDS}
 

@@ -11,8 +11,8 @@ from pathlib import Path
 
 from controller.commands.common import add_config_option, config_from_args
 from controller.evaluation import run_trials, train_on_default_scene, with_lighting
-from controller.metrics import summarise
 from controller.iteration_log import IterationLog
+from controller.metrics import summarise
 from controller.plots import plot_convergence
 from drivers.files import atomic_write_text
 

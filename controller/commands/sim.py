@@ -5,6 +5,9 @@ from controller.commands.leaves import register_group
 LEAVES = {
     "val-emulator": "sim_backend.val_emulator.command",
     "snapshot": "sim_backend.snapshot",
+    "magellan-emulator": "sim_backend.magellan_cli",
+    "ati-emulator": "sim_backend.ati_emulator_cli",
+    "camera-stream": "sim_backend.mjpeg_cli",
 }
 
 
