@@ -35,7 +35,7 @@ from drivers.pose import Pose
 from drivers.typed_config import from_mapping, to_mapping
 
 FORMAT = "finepos-model-bundle"
-FORMAT_VERSION = 1
+FORMAT_VERSION = 2  # 2: localisation.max_elongation
 POSE_KEYS = ("x_mm", "y_mm", "z_mm", "o_deg", "a_deg", "t_deg")
 
 
@@ -54,6 +54,7 @@ class ModelBundle:
         polarity: "bright" or "dark": which side of the threshold the object is on.
         expected_area_px: the object's blob area in training images.
         area_tolerance: a blob matches when |area / expected - 1| <= this.
+        max_elongation: a blob matches only up to this elongation (the part's shape).
         gabor: the filter-bank configuration NN2's inputs come from.
         nn1: (u_px, v_px) -> (dx_mm, dy_mm).
         nn2: Gabor features -> (sin(kappa dphi), cos(kappa dphi)).
@@ -71,6 +72,7 @@ class ModelBundle:
     polarity: Polarity
     expected_area_px: float
     area_tolerance: float
+    max_elongation: float
     gabor: GaborConfig
     nn1: NumpyMLP
     nn2: NumpyMLP
@@ -95,7 +97,8 @@ class ModelBundle:
         if self.polarity not in ("bright", "dark"):
             raise BundleError(f"polarity: must be bright or dark, got {self.polarity!r}")
         if not (math.isfinite(self.threshold) and math.isfinite(self.expected_area_px)
-                and self.expected_area_px > 0 and 0 < self.area_tolerance <= 1):
+                and self.expected_area_px > 0 and 0 < self.area_tolerance <= 1
+                and self.max_elongation >= 1.0):
             raise BundleError(f"localisation: need a finite threshold, expected_area_px > 0 "
                               f"and 0 < area_tolerance <= 1, got {self.threshold!r}, "
                               f"{self.expected_area_px!r}, {self.area_tolerance!r}")
@@ -122,7 +125,8 @@ class ModelBundle:
             "intensity": {"mean": self.intensity.mean, "std": self.intensity.std},
             "localisation": {"threshold": self.threshold, "polarity": self.polarity,
                              "expected_area_px": self.expected_area_px,
-                             "area_tolerance": self.area_tolerance},
+                             "area_tolerance": self.area_tolerance,
+                             "max_elongation": self.max_elongation},
             "gabor": to_mapping(self.gabor),
             "training": self.training,
         }
@@ -170,6 +174,7 @@ class ModelBundle:
                 polarity=info["localisation"]["polarity"],
                 expected_area_px=info["localisation"]["expected_area_px"],
                 area_tolerance=info["localisation"]["area_tolerance"],
+                max_elongation=info["localisation"]["max_elongation"],
                 gabor=from_mapping(GaborConfig, info["gabor"], "gabor"),
                 nn1=NumpyMLP.from_arrays(tensors, "nn1"),
                 nn2=NumpyMLP.from_arrays(tensors, "nn2"),

@@ -34,6 +34,8 @@ AREA_TOLERANCE = 0.35
 # Without an expected area, the largest blob is ambiguous if the runner-up has this fraction
 # of its area or more.
 AMBIGUITY_RATIO = 0.8
+# Elongation (major / minor axis of the blob's second moments) accepted when no limit is given.
+NO_ELONGATION_LIMIT = float("inf")
 # The histogram path trusts a mask whose bounding box is at most this many times its area
 # (a square at any rotation fills at least half of its box); others go to components.
 MAX_BOX_TO_AREA = 2.5
@@ -138,7 +140,8 @@ def otsu_threshold(values: np.ndarray, bins: int = 256) -> float:
 
 def localise(normalised: np.ndarray, threshold: float, expected_area_px: float | None = None,
              *, polarity: Polarity = "bright", area_tolerance: float = AREA_TOLERANCE,
-             min_blob_px: int = MIN_BLOB_PX) -> Localisation:
+             min_blob_px: int = MIN_BLOB_PX,
+             max_elongation: float = NO_ELONGATION_LIMIT) -> Localisation:
     """Find the object's centre in a normalised image.
 
     Args:
@@ -149,6 +152,8 @@ def localise(normalised: np.ndarray, threshold: float, expected_area_px: float |
         polarity: "bright" or "dark": which side of the threshold the object is on.
         area_tolerance: a blob matches when |area / expected - 1| <= this.
         min_blob_px: blobs below this area are ignored as noise.
+        max_elongation: a blob matches only if its ``elongation`` is at most this (the
+            trained object's shape: a bar does not pass for a cube of the same area).
 
     Returns:
         The Localisation; see its docstring for the three statuses.
@@ -170,27 +175,44 @@ def localise(normalised: np.ndarray, threshold: float, expected_area_px: float |
     matches = expected_area_px is None or \
         abs(area / expected_area_px - 1.0) <= area_tolerance
     if matches:
-        width = _single_run_length(cols)
-        height = _single_run_length(rows)
-        if width and height and width * height <= MAX_BOX_TO_AREA * area:
+        x0, width = _single_run(cols)
+        y0, height = _single_run(rows)
+        if width and height and width * height <= MAX_BOX_TO_AREA * area and (
+                max_elongation == NO_ELONGATION_LIMIT
+                or elongation(mask[y0:y0 + height, x0:x0 + width]) <= max_elongation):
             return Localisation("ok", float(cols @ _coords(cols.size)) / area,
                                 float(rows @ _coords(rows.size)) / area, area, "",
                                 "histogram")
-    return _by_components(mask, expected_area_px, area_tolerance, min_blob_px)
+    return _by_components(mask, expected_area_px, area_tolerance, min_blob_px, max_elongation)
 
 
-def _single_run_length(hist: np.ndarray) -> int:
-    """Length of the non-zero run of ``hist`` if there is exactly one run, else 0."""
+def _single_run(hist: np.ndarray) -> tuple[int, int]:
+    """(start, length) of the non-zero run of ``hist`` if there is exactly one run, else
+    (0, 0)."""
     nz = hist > 0.0
     first = int(nz.argmax())
     last = hist.size - 1 - int(nz[::-1].argmax())
     length = last - first + 1
-    return length if int(np.count_nonzero(nz)) == length else 0
+    return (first, length) if int(np.count_nonzero(nz)) == length else (0, 0)
+
+
+def elongation(mask: np.ndarray) -> float:
+    """Major over minor axis of a binary blob (from its second central moments): 1 for a disc
+    or a square, about 4 for a 4:1 bar. Pass the blob's bounding box only: it is cheap there."""
+    mo = cv2.moments(mask, binaryImage=True)
+    area = mo["m00"]
+    if area <= 0:
+        return NO_ELONGATION_LIMIT
+    mu20, mu02, mu11 = mo["mu20"] / area, mo["mu02"] / area, mo["mu11"] / area
+    half_sum = (mu20 + mu02) / 2.0
+    spread = float(np.hypot((mu20 - mu02) / 2.0, mu11))
+    minor = half_sum - spread
+    return float(np.sqrt((half_sum + spread) / minor)) if minor > 1e-9 else NO_ELONGATION_LIMIT
 
 
 def _by_components(mask: np.ndarray, expected_area_px: float | None, area_tolerance: float,
-                   min_blob_px: int) -> Localisation:
-    n, _, stats, centroids = cv2.connectedComponentsWithStatsWithAlgorithm(
+                   min_blob_px: int, max_elongation: float) -> Localisation:
+    n, labels, stats, centroids = cv2.connectedComponentsWithStatsWithAlgorithm(
         mask.astype(np.uint8), 8, cv2.CV_32S, cv2.CCL_BBDT)
     areas = stats[1:n, cv2.CC_STAT_AREA].astype(np.float64)
     blobs = np.flatnonzero(areas >= min_blob_px)
@@ -208,6 +230,15 @@ def _by_components(mask: np.ndarray, expected_area_px: float | None, area_tolera
         picked = best
     else:
         close = blobs[np.abs(areas[blobs] / expected_area_px - 1.0) <= area_tolerance]
+        if close.size and max_elongation != NO_ELONGATION_LIMIT:
+            shaped = [i for i in close
+                      if _blob_elongation(labels, stats, int(i) + 1) <= max_elongation]
+            if not shaped:
+                return Localisation(
+                    "no_object", None, None, None,
+                    f"{close.size} blob(s) of the expected area, none of the trained shape "
+                    f"(elongation above {max_elongation:.2f})", "components")
+            close = np.array(shaped, dtype=close.dtype)
         if close.size == 0:
             return Localisation(
                 "no_object", None, None, None,
@@ -224,3 +255,8 @@ def _by_components(mask: np.ndarray, expected_area_px: float | None, area_tolera
     others = blobs.size - 1
     return Localisation("ok", float(u), float(v), float(areas[picked]),
                         f"picked among {others + 1} blobs" if others else "", "components")
+
+
+def _blob_elongation(labels: np.ndarray, stats: np.ndarray, label: int) -> float:
+    x, y, w, h = (int(v) for v in stats[label, :4])
+    return elongation((labels[y:y + h, x:x + w] == label).astype(np.uint8))

@@ -12,6 +12,7 @@ import time
 from collections.abc import Mapping
 from dataclasses import dataclass
 
+import cv2
 import numpy as np
 
 from calibration_free import angles
@@ -22,6 +23,8 @@ from calibration_free.gabor import GaborBank, GaborConfig
 from calibration_free.localise import (
     Localisation,
     Polarity,
+    binarise,
+    elongation,
     localise,
     otsu_threshold,
 )
@@ -45,6 +48,8 @@ NN2_WEIGHT_DECAY = 1e-3
 MAX_OBJECT_FRACTION = 0.5
 # Margin added to the relative half-range of the training areas (see _prepare).
 AREA_MARGIN = 0.2
+# Factor on the most elongated training blob: the largest elongation still taken for the part.
+ELONGATION_MARGIN = 1.3
 # Otsu's threshold is computed on every OTSU_STRIDE-th pixel along each axis.
 OTSU_STRIDE = 2
 
@@ -119,7 +124,7 @@ class Perception:
     def _localise(self, normalised: np.ndarray) -> Localisation:
         b = self.bundle
         return localise(normalised, b.threshold, b.expected_area_px, polarity=b.polarity,
-                        area_tolerance=b.area_tolerance)
+                        area_tolerance=b.area_tolerance, max_elongation=b.max_elongation)
 
     def translation(self, image: np.ndarray) -> Percept:
         """NN1 only: the corrective translation (the half-loop fast path).
@@ -199,6 +204,7 @@ class _Prepared:
     threshold: float
     expected_area_px: float
     area_tolerance: float
+    max_elongation: float
     normalised: dict[str, list[np.ndarray]]
     found: dict[str, list[Localisation]]
     usable: dict[str, np.ndarray]
@@ -234,11 +240,27 @@ def _prepare(sets: dict[str, Dataset], polarity: Polarity, image_area_px: int) -
                             f"image: it is the table; check the polarity ({polarity!r})")
     expected_area = (lo + hi) / 2.0
     tolerance = min(1.0, (hi - lo) / (hi + lo) + AREA_MARGIN)
+    # The trained part's shape: clutter of the right area but another shape (a bar) is not it.
+    shapes = [_elongation_of_largest_blob(n, threshold, polarity)
+              for ns in normalised.values() for n in ns]
+    max_elongation = max(shapes) * ELONGATION_MARGIN
     found = {name: [localise(n, threshold, expected_area, polarity=polarity,
-                             area_tolerance=tolerance) for n in normalised[name]]
+                             area_tolerance=tolerance, max_elongation=max_elongation)
+                    for n in normalised[name]]
              for name in sets}
-    return _Prepared(intensity, threshold, expected_area, tolerance, normalised, found,
-                     {name: _usable(found[name], name) for name in sets})
+    return _Prepared(intensity, threshold, expected_area, tolerance, max_elongation, normalised,
+                     found, {name: _usable(found[name], name) for name in sets})
+
+
+def _elongation_of_largest_blob(normalised: np.ndarray, threshold: float,
+                                polarity: Polarity) -> float:
+    mask = binarise(normalised, threshold, polarity).astype(np.uint8)
+    n, labels, stats, _ = cv2.connectedComponentsWithStats(mask, connectivity=8)
+    if n < 2:
+        return 1.0
+    largest = 1 + int(np.argmax(stats[1:, cv2.CC_STAT_AREA]))
+    x, y, w, h = (int(v) for v in stats[largest, :4])
+    return elongation((labels[y:y + h, x:x + w] == largest).astype(np.uint8))
 
 
 def _pose(nominal_pose: Pose | Mapping[str, float]) -> Pose:
@@ -342,4 +364,5 @@ def train_bundle(nn1_data: Dataset, nn2_data: Dataset, *, object_kind: str, kapp
                        frame_height_px=height, frame_width_px=width,
                        intensity=prep.intensity, threshold=prep.threshold, polarity=polarity,
                        expected_area_px=prep.expected_area_px, area_tolerance=prep.area_tolerance,
+                       max_elongation=prep.max_elongation,
                        gabor=gabor, nn1=nn1.model, nn2=nn2.model, training=training)

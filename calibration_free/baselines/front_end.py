@@ -18,7 +18,13 @@ import numpy as np
 
 from calibration_free.dataset import Dataset
 from calibration_free.errors import ImageError, TrainingError
-from calibration_free.localise import AREA_TOLERANCE, Localisation, Polarity, localise
+from calibration_free.localise import (
+    AREA_TOLERANCE,
+    NO_ELONGATION_LIMIT,
+    Localisation,
+    Polarity,
+    localise,
+)
 from calibration_free.pipeline import _check_sets, _pose, _prepare
 from calibration_free.preprocess import IntensityStats, max_channel_u8, normalise
 from drivers.errors import ConfigError
@@ -37,6 +43,7 @@ class FrontEnd:
         expected_area_px: the middle of the object's blob areas in the training images.
         area_tolerance: a blob matches when |area / expected - 1| <= this (spans the
             training images' areas).
+        max_elongation: a blob matches only up to this elongation (the part's shape).
     """
 
     frame_height_px: int
@@ -46,6 +53,7 @@ class FrontEnd:
     polarity: Polarity
     expected_area_px: float
     area_tolerance: float = AREA_TOLERANCE
+    max_elongation: float = NO_ELONGATION_LIMIT
 
     def __post_init__(self) -> None:
         if self.frame_height_px < 1 or self.frame_width_px < 1:
@@ -76,14 +84,16 @@ class FrontEnd:
     def localise(self, normalised: np.ndarray) -> Localisation:
         """The object's centroid in a normalised image."""
         return localise(normalised, self.threshold, self.expected_area_px,
-                        polarity=self.polarity, area_tolerance=self.area_tolerance)
+                        polarity=self.polarity, area_tolerance=self.area_tolerance,
+                        max_elongation=self.max_elongation)
 
     def to_info(self) -> dict[str, Any]:
         return {"frame_px": {"height": self.frame_height_px, "width": self.frame_width_px},
                 "intensity": {"mean": self.intensity.mean, "std": self.intensity.std},
                 "localisation": {"threshold": self.threshold, "polarity": self.polarity,
                                  "expected_area_px": self.expected_area_px,
-                                 "area_tolerance": self.area_tolerance}}
+                                 "area_tolerance": self.area_tolerance,
+                                 "max_elongation": self.max_elongation}}
 
     @classmethod
     def from_info(cls, info: Mapping[str, Any]) -> FrontEnd:
@@ -92,7 +102,7 @@ class FrontEnd:
         return cls(int(info["frame_px"]["height"]), int(info["frame_px"]["width"]),
                    IntensityStats(**info["intensity"]), float(loc["threshold"]),
                    loc["polarity"], float(loc["expected_area_px"]),
-                   float(loc["area_tolerance"]))
+                   float(loc["area_tolerance"]), float(loc["max_elongation"]))
 
 
 @dataclass(frozen=True)
@@ -131,7 +141,7 @@ def prepare_training(sets: dict[str, Dataset], polarity: Polarity = "bright") ->
     height, width = _check_sets(sets)
     prep = _prepare(sets, polarity, height * width)
     front = FrontEnd(height, width, prep.intensity, prep.threshold, polarity,
-                     prep.expected_area_px, prep.area_tolerance)
+                     prep.expected_area_px, prep.area_tolerance, prep.max_elongation)
     return PreparedSets(front, prep.normalised, prep.found, prep.usable,
                         time.perf_counter() - start)
 

@@ -134,3 +134,35 @@ def test_otsu_separates_two_modes():
 def test_bad_expected_area_is_refused():
     with pytest.raises(ConfigError, match="expected_area_px"):
         localise(np.zeros((4, 4), np.float32), 0.5, 0.0)
+
+
+def _shapes(*blobs):
+    """A normalised-looking image (0 background, 1 inside) with filled rectangles."""
+    img = np.zeros((144, 192), np.float32)
+    for x0, y0, x1, y1 in blobs:
+        img[y0:y1, x0:x1] = 1.0
+    return img
+
+
+def test_elongation_of_square_and_bar():
+    from calibration_free.localise import elongation
+
+    square = np.zeros((30, 30), np.uint8)
+    square[5:25, 5:25] = 1
+    bar = np.zeros((30, 90), np.uint8)
+    bar[10:20, 5:85] = 1
+    assert elongation(square) == pytest.approx(1.0, abs=1e-6)
+    assert elongation(bar) == pytest.approx(8.0, rel=0.05)
+
+
+def test_a_bar_of_the_right_area_is_not_the_part():
+    bar = _shapes((40, 60, 140, 68))  # 100 x 8 = 800 px, elongation ~12
+    loc = localise(bar, 0.5, 800.0, max_elongation=1.5)
+    assert loc.status == "no_object" and "shape" in loc.reason
+
+
+def test_the_part_is_picked_beside_a_bar_of_the_same_area():
+    img = _shapes((20, 20, 48, 48), (60, 100, 158, 108))  # square 784 px; bar 784 px
+    assert localise(img, 0.5, 784.0).status == "ambiguous"
+    loc = localise(img, 0.5, 784.0, max_elongation=1.5)
+    assert loc.ok and loc.u_px == pytest.approx(33.5) and loc.v_px == pytest.approx(33.5)
