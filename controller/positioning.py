@@ -108,8 +108,8 @@ class PositioningLoop:
         per_iteration: list[float] = []
 
         def finish(outcome: Outcome, reason: str) -> PositioningResult:
-            logger.info("positioning %s: %s after %.1f loops (%s)", run_id, outcome, loops,
-                        reason)
+            logger.debug("positioning %s: %s after %.1f loops (%s)", run_id, outcome, loops,
+                         reason)
             return PositioningResult(run_id, outcome, reason, loops, iteration, states,
                                      per_iteration)
 

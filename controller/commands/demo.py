@@ -31,10 +31,14 @@ def table_markdown(reports: dict[str, dict]) -> str:
             lines.append(f"| {lighting} | {b} | {rms['x_mm']:.3f} | {rms['y_mm']:.3f} | "
                          f"{rms['phi_deg']:.2f} | {safe_txt} |")
     lines.append("")
+    def loops(value) -> str:
+        return "never" if value is None else f"{value:g}"
+
     for lighting, r in reports.items():
         lts = r["loops_to_safe"]
-        lines.append(f"- {lighting} light: loops to a safe grasp median {lts['median']}, "
-                     f"p95 {lts['p95']}; grasp success {r['grasp_success_rate'] * 100:.0f}%; "
+        lines.append(f"- {lighting} light: loops to a safe grasp median {loops(lts['median'])}, "
+                     f"p95 {loops(lts['p95'])}; grasp success "
+                     f"{r['grasp_success_rate'] * 100:.0f}%; "
                      f"{r['seconds_per_loop'] * 1e3:.1f} ms per loop")
     return "\n".join(lines) + "\n"
 
