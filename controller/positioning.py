@@ -128,7 +128,7 @@ class PositioningLoop:
             if tr.status != "ok":
                 t2 = time.perf_counter()
                 self._write(record, "stop", loops, None, None, False, None, t0, t1, t2, t2,
-                            frame.image)
+                            frame.image, states[-1].error)
                 return finish(tr.status, tr.reason or tr.status)
             shift = math.hypot(tr.dx_mm, tr.dy_mm)
             if shift > cfg.r_fine_mm:
@@ -143,12 +143,12 @@ class PositioningLoop:
             if kind == "full" and shift <= cfg.converge_mm and \
                     abs(step.dphi_deg) <= cfg.converge_deg:
                 self._write(record, "check", loops, step, None, False, None, t0, t1, t2, t2,
-                            frame.image)
+                            frame.image, states[-1].error)
                 return finish("converged", f"step {shift:.3f} mm / {step.dphi_deg:.2f} deg "
                                            "below the convergence thresholds")
             if loops + cost > budget + 1e-9:
                 self._write(record, "stop", loops, step, None, False, None, t0, t1, t2, t2,
-                            frame.image)
+                            frame.image, states[-1].error)
                 return finish("budget", f"loop budget {budget:g} spent")
             try:
                 motion = self.arm.move_tool(step)
@@ -156,7 +156,7 @@ class PositioningLoop:
                 t3 = time.perf_counter()
                 record["rejected"] = exc.reason
                 self._write(record, "stop", loops, step, None, False, None, t0, t1, t2, t3,
-                            frame.image)
+                            frame.image, states[-1].error)
                 return finish("rejected", f"safety layer rejected the step: {exc.reason}")
             t3 = time.perf_counter()
             loops += cost

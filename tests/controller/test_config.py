@@ -1,0 +1,48 @@
+"""The root config: sections, device backends by type, errors naming the key path."""
+
+import pytest
+
+from controller.config import config_from_mapping, load_config
+from drivers.errors import ConfigError
+
+
+def test_defaults_are_the_simulated_cell():
+    cfg = load_config(None)
+    assert (cfg.arm.type, cfg.camera.type, cfg.wrench.type) == ("sim", "sim", "sim")
+    assert cfg.controller.loop.r_fine_mm == 4.0
+    assert cfg.controller.acquisition.nn1.a_mm == 25.0 and cfg.controller.acquisition.nn2.a_mm == 5.0
+    assert cfg.perception.gabor.n_filters == 36
+
+
+def test_backend_options_are_checked_by_type():
+    cfg = config_from_mapping({"arm": {"type": "val", "port": "loop://"},
+                               "wrench": {"type": "ati", "port": "loop://"},
+                               "camera": {"type": "opencv", "source": "http://127.0.0.1:1/x"}})
+    assert cfg.arm.type == "val" and cfg.arm.options.port == "loop://"
+    assert cfg.wrench.options.counts_per_force == 20.0
+
+
+@pytest.mark.parametrize("data,message", [
+    ({"robot": {}}, "robot: unknown section"),
+    ({"arm": {"type": "kuka"}}, "arm.type: must be one of sim | val"),
+    ({"arm": {"type": "sim", "repeatability_mm": -1}}, "arm.repeatability_mm: must be >= 0"),
+    ({"arm": {"type": "val", "baudrate": 9600}}, "arm"),
+    ({"scene": {"lighting": {"preset": "disco"}}}, "scene.lighting.preset: must be one of"),
+    ({"controller": {"loop": {"r_fine_mm": "four"}}}, "controller.loop.r_fine_mm: expected a number"),
+    ({"controller": {"grasp": {"guards": [{"quantity": "fz_n", "op": "=", "limit": 1,
+                                           "action": "stop"}]}}},
+     "controller.grasp.guards[0].op: must be one of"),
+    ({"safety": {"on_violation": "ignore"}}, "safety.on_violation: must be one of reject | clip"),
+    ({"perception": {"gabor": {"lambda_px": 0}}}, "perception.gabor.lambda_px: must be > 0"),
+])
+def test_bad_configs_name_the_key(data, message):
+    with pytest.raises(ConfigError) as info:
+        config_from_mapping(data)
+    assert message in str(info.value)
+
+
+def test_file_errors_name_the_file(tmp_path):
+    f = tmp_path / "cell.yaml"
+    f.write_text("scene:\n  clutter: {count: 99}\n")
+    with pytest.raises(ConfigError, match=r"cell.yaml: scene.clutter.count: must be <= 8"):
+        load_config(f)

@@ -1,0 +1,88 @@
+"""End to end on the simulated cell: teach, acquire, train, position, grasp; the CLI."""
+
+import json
+
+import pytest
+
+from controller.cli import main
+from controller.config import load_config
+from controller.devices import open_devices
+from controller.fine_positioner import FinePositioner
+from controller.iteration_log import IterationLog, read_log
+from controller.metrics import is_safe
+from drivers.pose import ToolStep
+
+pytestmark = pytest.mark.slow
+
+
+@pytest.fixture(scope="module")
+def trained(tmp_path_factory):
+    """A cell state and a Gabor model taught and trained on the default simulated scene."""
+    state = tmp_path_factory.mktemp("state")
+    cfg = load_config(None)
+    with open_devices(cfg) as devices:
+        fp = FinePositioner(devices, cfg, state_dir=state)
+        fp.teach_auto()
+        fp.acquire("nn1", progress=False)
+        fp.acquire("nn2", progress=False)
+        model = fp.train()
+    assert model.train_images == 126
+    return state
+
+
+@pytest.mark.parametrize("offset", [ToolStep(18.0, -12.0, 0.0, 30.0), ToolStep(-3.0, 2.0, 0.0,
+                                                                               -40.0)])
+def test_converges_to_a_safe_grasp_within_a_small_budget(trained, tmp_path, offset):
+    cfg = load_config(None)
+    with open_devices(cfg, seed=7) as devices, IterationLog(tmp_path / "it.jsonl") as log:
+        fp = FinePositioner(devices, cfg, log=log, state_dir=trained)
+        fp.move_to(fp.state().nominal_pose.moved_in_tool_frame(offset))
+        result = fp.position(max_loops=2.5)
+        assert result.ok and is_safe(result.states[-1].error), result.states
+        ex, ey, ephi = result.states[-1].error
+        assert abs(ex) < 0.5 and abs(ey) < 0.5 and abs(ephi) < 2.0
+        grasp = fp.grasp()
+        assert grasp.success, grasp.reason
+        assert devices.cell.holding
+    records = read_log(tmp_path / "it.jsonl")
+    assert records[0]["loop_kind"] == ("half" if offset.translation_mm > 4 else "full")
+    assert all(r["error"] is not None for r in records)
+    full = [r for r in records if r["loop_kind"] == "full"]
+    assert full and len(full[0]["features"]) == 36 and len(full[0]["nn2"]) == 2
+
+
+def test_no_object_stops_without_moving(trained):
+    cfg = load_config(None)
+    with open_devices(cfg) as devices:
+        fp = FinePositioner(devices, cfg, state_dir=trained)
+        devices.cell.place_object(340.0, 100.0, 0.0)  # far outside the camera's view
+        fp.move_to(fp.state().nominal_pose)
+        before = devices.arm.pose()
+        result = fp.position()
+        assert result.outcome == "no_object" and result.loops == 0
+        assert devices.arm.pose() == before
+
+
+def test_cli_position_and_evaluate(trained, tmp_path, capsys):
+    assert main(["position", "--state-dir", str(trained), "--offset", "10,-6,15",
+                 "--log", str(tmp_path / "p.jsonl"), "--grasp"]) == 0
+    out = json.loads(capsys.readouterr().out)
+    assert out["outcome"] == "converged" and out["grasp"]["success"]
+    report_path = tmp_path / "eval.json"
+    assert main(["evaluate", "--trials", "3", "--seed", "2", "--quiet", "--model",
+                 str(trained / "model-gabor.fpm"), "--json", str(report_path)]) == 0
+    report = json.loads(report_path.read_text())
+    assert report["system"] == "gabor" and report["trials"] == 3 and report["object"] == "cube"
+    assert set(report["rms"]) >= {"0.5", "1.0", "1.5", "2.5"}
+    assert set(report["rms"]["2.5"]) == {"x_mm", "y_mm", "phi_deg"}
+    assert set(report["safe_rate"]) >= {"1.0", "1.5", "2.5"}
+    assert {"median", "p95"} <= set(report["loops_to_safe"])
+    for key in ("grasp_success_rate", "train_images", "train_seconds", "seconds_per_loop"):
+        assert key in report
+    assert report["safe_rate"]["2.5"] == 1.0
+
+
+def test_cli_reports_bad_input_clearly(tmp_path, capsys):
+    assert main(["position", "--state-dir", str(tmp_path), "--offset", "1,2"]) == 2
+    err = capsys.readouterr().err
+    assert "error:" in err and ("cell state" in err or "--offset" in err)
