@@ -10,7 +10,8 @@ def test_defaults_are_the_simulated_cell():
     cfg = load_config(None)
     assert (cfg.arm.type, cfg.camera.type, cfg.wrench.type) == ("sim", "sim", "sim")
     assert cfg.controller.loop.r_fine_mm == 4.0
-    assert cfg.controller.acquisition.nn1.a_mm == 25.0 and cfg.controller.acquisition.nn2.a_mm == 5.0
+    acquisition = cfg.controller.acquisition
+    assert acquisition.nn1.a_mm == 25.0 and acquisition.nn2.a_mm == 5.0
     assert cfg.perception.gabor.n_filters == 36
 
 
@@ -28,7 +29,8 @@ def test_backend_options_are_checked_by_type():
     ({"arm": {"type": "sim", "repeatability_mm": -1}}, "arm.repeatability_mm: must be >= 0"),
     ({"arm": {"type": "val", "baudrate": 9600}}, "arm"),
     ({"scene": {"lighting": {"preset": "disco"}}}, "scene.lighting.preset: must be one of"),
-    ({"controller": {"loop": {"r_fine_mm": "four"}}}, "controller.loop.r_fine_mm: expected a number"),
+    ({"controller": {"loop": {"r_fine_mm": "four"}}},
+     "controller.loop.r_fine_mm: expected a number"),
     ({"controller": {"grasp": {"guards": [{"quantity": "fz_n", "op": "=", "limit": 1,
                                            "action": "stop"}]}}},
      "controller.grasp.guards[0].op: must be one of"),
