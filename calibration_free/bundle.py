@@ -1,11 +1,10 @@
 """Model bundle: everything needed to run perception for one taught object, in one file.
 
-Format: a safetensors file (loading parses a JSON header and raw little-endian arrays, so it
-cannot execute code). Arrays: the two networks (``nn1.*``, ``nn2.*``, see
-``NumpyMLP.to_arrays``). Header metadata: ``finepos_bundle``, the JSON of everything else
-(format name and version, object kind, kappa, nominal pose, intensity statistics, localisation
-parameters, Gabor configuration, training metadata), and ``sha256``, a digest of that JSON and
-of every array, which catches corruption that safetensors' own checks (sizes and offsets) miss.
+Format: a finepos model file (``calibration_free.model_file``: safetensors, so loading cannot
+execute code; a JSON header; a sha256 over both) of kind ``gabor``. Arrays: the two networks
+(``nn1.*``, ``nn2.*``, see ``NumpyMLP.to_arrays``). JSON: object kind, kappa, nominal pose,
+frame size, intensity statistics, localisation parameters, Gabor configuration, training
+metadata.
 
 Saving is atomic. Loading returns a new bundle or raises BundleError; it never modifies
 anything, so a failed load leaves the caller's current bundle in place.
@@ -13,28 +12,24 @@ anything, so a failed load leaves the caller's current bundle in place.
 
 from __future__ import annotations
 
-import hashlib
-import json
 import math
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
 import numpy as np
-import safetensors.numpy
-from safetensors import SafetensorError
 
 from calibration_free.errors import BundleError
 from calibration_free.gabor import GaborConfig
 from calibration_free.localise import Polarity
 from calibration_free.mlp import NumpyMLP
+from calibration_free.model_file import read_model, write_model
 from calibration_free.preprocess import IntensityStats
 from drivers.errors import FineposError
-from drivers.files import atomic_write_bytes
 from drivers.pose import Pose
 from drivers.typed_config import from_mapping, to_mapping
 
-FORMAT = "finepos-model-bundle"
+KIND = "gabor"
 FORMAT_VERSION = 2  # 2: localisation.max_elongation
 POSE_KEYS = ("x_mm", "y_mm", "z_mm", "o_deg", "a_deg", "t_deg")
 
@@ -116,8 +111,6 @@ class ModelBundle:
 
     def _info(self) -> dict[str, Any]:
         return {
-            "format": FORMAT,
-            "format_version": self.format_version,
             "object_kind": self.object_kind,
             "kappa": self.kappa,
             "nominal_pose": self.nominal_pose,
@@ -137,12 +130,11 @@ class ModelBundle:
         Raises:
             BundleError: the training metadata is not JSON-serialisable.
         """
-        tensors = {**self.nn1.to_arrays("nn1"), **self.nn2.to_arrays("nn2")}
-        try:
-            data = _pack(self._info(), tensors)
-        except (TypeError, ValueError) as exc:
-            raise BundleError(f"{path}: cannot serialise bundle metadata: {exc}") from exc
-        atomic_write_bytes(path, data)
+        write_model(path, KIND, FORMAT_VERSION, self._info(), self.arrays())
+
+    def arrays(self) -> dict[str, np.ndarray]:
+        """The networks' weights as named arrays (what the file stores besides the JSON)."""
+        return {**self.nn1.to_arrays("nn1"), **self.nn2.to_arrays("nn2")}
 
     @classmethod
     def load(cls, path: str | Path, expect_object: str | None = None) -> ModelBundle:
@@ -156,12 +148,7 @@ class ModelBundle:
             BundleError: the file is missing, corrupt, truncated, of another format version,
                 inconsistent, or taught on another object than ``expect_object``.
         """
-        try:
-            data = Path(path).read_bytes()
-        except OSError as exc:
-            raise BundleError(f"{path}: cannot read model bundle: {exc.strerror or exc}") \
-                from exc
-        info, tensors = _unpack(data, path)
+        info, tensors = read_model(path, KIND, FORMAT_VERSION)
         try:
             bundle = cls(
                 object_kind=info["object_kind"],
@@ -187,51 +174,3 @@ class ModelBundle:
             raise BundleError(f"{path}: this bundle was taught on object "
                               f"{bundle.object_kind!r}, not {expect_object!r}")
         return bundle
-
-
-def _digest(info_json: str, tensors: dict[str, np.ndarray]) -> str:
-    h = hashlib.sha256(info_json.encode("utf-8"))
-    for name in sorted(tensors):
-        a = np.ascontiguousarray(tensors[name])
-        h.update(f"\0{name}\0{a.dtype.str}\0{a.shape}\0".encode())
-        h.update(a.tobytes())
-    return h.hexdigest()
-
-
-def _pack(info: dict[str, Any], tensors: dict[str, np.ndarray]) -> bytes:
-    """Bytes of a bundle file holding ``info`` (JSON) and ``tensors``."""
-    info_json = json.dumps(info, allow_nan=False, sort_keys=True)
-    tensors = {k: np.ascontiguousarray(v) for k, v in tensors.items()}
-    return safetensors.numpy.save(
-        tensors, metadata={"finepos_bundle": info_json, "sha256": _digest(info_json, tensors)})
-
-
-def _unpack(data: bytes, path: str | Path) -> tuple[dict[str, Any], dict[str, np.ndarray]]:
-    """Check and split the bytes of a bundle file into its JSON info and its arrays."""
-    if len(data) < 8:
-        raise BundleError(f"{path}: not a model bundle (only {len(data)} bytes)")
-    header_len = int.from_bytes(data[:8], "little")
-    if header_len > len(data) - 8:
-        raise BundleError(f"{path}: truncated model bundle (header claims {header_len} bytes, "
-                          f"{len(data) - 8} present)")
-    try:
-        header = json.loads(data[8:8 + header_len].decode("utf-8"))
-        meta = header["__metadata__"]
-        info_json, digest = meta["finepos_bundle"], meta["sha256"]
-        info = json.loads(info_json)
-    except (UnicodeDecodeError, ValueError, KeyError, TypeError) as exc:
-        raise BundleError(f"{path}: not a finepos model bundle or corrupt header ({exc})") \
-            from exc
-    if not isinstance(info, dict) or info.get("format") != FORMAT:
-        raise BundleError(f"{path}: not a finepos model bundle")
-    if info.get("format_version") != FORMAT_VERSION:
-        raise BundleError(f"{path}: model bundle format version {info.get('format_version')!r}"
-                          f" is not supported (this finepos reads version {FORMAT_VERSION});"
-                          f" retrain or convert the bundle")
-    try:
-        tensors = safetensors.numpy.load(data)
-    except SafetensorError as exc:
-        raise BundleError(f"{path}: corrupt or truncated model bundle: {exc}") from exc
-    if _digest(info_json, tensors) != digest:
-        raise BundleError(f"{path}: corrupt model bundle (checksum mismatch)")
-    return info, tensors

@@ -10,5 +10,5 @@ and ``psom`` (the parametrised self-organising map for the translation), ``hough
 ``hough_train``.
 
 Shared: ``front_end`` (the Gabor system's preprocessing and localisation, as stored in a
-baseline model), ``model_file`` (the model file format).
+baseline model); the file format is ``calibration_free.model_file``, as for the Gabor bundle.
 """

@@ -29,10 +29,10 @@ from calibration_free.baselines.constellation import (
 )
 from calibration_free.baselines.front_end import FrontEnd
 from calibration_free.baselines.hough import HoughLine
-from calibration_free.baselines.model_file import read_model, write_model
 from calibration_free.baselines.psom import PSOM
 from calibration_free.errors import BundleError
 from calibration_free.localise import Localisation, Status
+from calibration_free.model_file import read_model, write_model
 from drivers.errors import ConfigError, FineposError
 from drivers.typed_config import from_mapping, to_mapping
 

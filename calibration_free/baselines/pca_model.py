@@ -23,10 +23,10 @@ from calibration_free import angles
 from calibration_free.baselines.eigenimages import Eigenimages, roi_vector
 from calibration_free.baselines.front_end import FrontEnd
 from calibration_free.baselines.fuzzy_controller import MAX_RULES, BSplineFuzzyController
-from calibration_free.baselines.model_file import read_model, write_model
 from calibration_free.errors import BundleError
 from calibration_free.localise import Localisation
 from calibration_free.mlp import NumpyMLP
+from calibration_free.model_file import read_model, write_model
 from calibration_free.roi import ROI_PX, extract_roi
 from drivers.errors import ConfigError, FineposError
 from drivers.typed_config import from_mapping, to_mapping

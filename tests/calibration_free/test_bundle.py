@@ -8,9 +8,10 @@ import json
 import numpy as np
 import pytest
 
-from calibration_free.bundle import FORMAT_VERSION, ModelBundle, _pack
+from calibration_free.bundle import FORMAT_VERSION, KIND, ModelBundle
 from calibration_free.errors import BundleError
 from calibration_free.gabor import GaborConfig
+from calibration_free.model_file import pack_model
 from calibration_free.pipeline import Perception
 from calibration_free.synthetic import render
 
@@ -39,7 +40,11 @@ def test_round_trip_keeps_everything(bundle, cell, tmp_path):
 
 
 def info_and_tensors(bundle: ModelBundle) -> tuple[dict, dict]:
-    return bundle._info(), {**bundle.nn1.to_arrays("nn1"), **bundle.nn2.to_arrays("nn2")}
+    return bundle._info(), bundle.arrays()
+
+
+def pack(info: dict, tensors: dict, version: int = FORMAT_VERSION) -> bytes:
+    return pack_model(KIND, version, info, tensors)
 
 
 def bad_files(bundle: ModelBundle, good: bytes) -> dict[str, bytes]:
@@ -52,7 +57,7 @@ def bad_files(bundle: ModelBundle, good: bytes) -> dict[str, bytes]:
     assert good[at:at + 1] == b"4"
     in_header[at] = ord("3")                  # kappa 4 -> 3: still valid JSON
     info, tensors = info_and_tensors(bundle)
-    no_digest = _pack(info, tensors).replace(b'"sha256"', b'"sha999"')
+    no_digest = pack(info, tensors).replace(b'"sha256"', b'"sha999"')
     return {
         "flipped_weight": bytes(in_data),
         "edited_header": bytes(in_header),
@@ -82,16 +87,14 @@ def test_corrupt_or_truncated_bundles_are_refused_and_nothing_changes(bundle, tm
 
 def test_checksum_catches_a_single_changed_weight(bundle, tmp_path):
     path = tmp_path / "flip.bundle"
-    path.write_bytes(bad_files(bundle, _pack(*info_and_tensors(bundle)))["flipped_weight"])
+    path.write_bytes(bad_files(bundle, pack(*info_and_tensors(bundle)))["flipped_weight"])
     with pytest.raises(BundleError, match="checksum"):
         ModelBundle.load(path)
 
 
 def test_wrong_version_is_refused(bundle, tmp_path):
-    info, tensors = info_and_tensors(bundle)
-    info["format_version"] = FORMAT_VERSION + 1
     path = tmp_path / "future.bundle"
-    path.write_bytes(_pack(info, tensors))
+    path.write_bytes(pack(*info_and_tensors(bundle), version=FORMAT_VERSION + 1))
     with pytest.raises(BundleError, match=f"version {FORMAT_VERSION + 1} is not supported"):
         ModelBundle.load(path)
 
@@ -107,18 +110,25 @@ def test_not_a_bundle_and_missing_file_are_refused(bundle, tmp_path):
     info, tensors = info_and_tensors(bundle)
     info["format"] = "something-else"
     path = tmp_path / "other.bundle"
-    path.write_bytes(_pack(info, tensors))
-    with pytest.raises(BundleError, match="not a finepos model bundle"):
+    path.write_bytes(pack(info, tensors))
+    with pytest.raises(BundleError, match="not a finepos model file"):
         ModelBundle.load(path)
     with pytest.raises(BundleError, match="cannot read"):
         ModelBundle.load(tmp_path / "missing.bundle")
+
+
+def test_another_systems_model_is_refused(bundle, tmp_path):
+    path = tmp_path / "pca.model"
+    path.write_bytes(pack_model("pca", 1, {}, bundle.arrays()))
+    with pytest.raises(BundleError, match="a 'pca' model, not a 'gabor' model"):
+        ModelBundle.load(path)
 
 
 def test_inconsistent_contents_are_refused(bundle, tmp_path):
     info, tensors = info_and_tensors(bundle)
     del tensors["nn2.w1"]
     path = tmp_path / "cut.bundle"
-    path.write_bytes(_pack(info, tensors))
+    path.write_bytes(pack(info, tensors))
     with pytest.raises(BundleError, match="inconsistent"):
         ModelBundle.load(path)
     with pytest.raises(BundleError, match="nn2: must map 27 features"):

@@ -1,12 +1,12 @@
-"""The baseline model file: refuses corrupt, truncated, foreign and other-version files."""
+"""The finepos model file: refuses corrupt, truncated, foreign and other-version files."""
 
 from __future__ import annotations
 
 import numpy as np
 import pytest
 
-from calibration_free.baselines.model_file import read_model, write_model
 from calibration_free.errors import BundleError
+from calibration_free.model_file import read_model, write_model
 
 ARRAYS = {"w": np.arange(6.0).reshape(2, 3), "n": np.array([1, 2, 3], dtype=np.int64)}
 

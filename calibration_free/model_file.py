@@ -1,10 +1,10 @@
-"""The baseline systems' model file: a safetensors file whose loading cannot execute code.
+"""finepos model files (every system's): safetensors files whose loading cannot execute code.
 
 Arrays are stored as safetensors tensors; everything else is one JSON document in the header
-metadata (``finepos_baseline``), together with ``sha256``, a digest of that JSON and of every
+metadata (``finepos_model``), together with ``sha256``, a digest of that JSON and of every
 array that catches corruption safetensors' own size checks miss. The JSON names the format,
-its version and the system (``kind``: ``pca`` or ``hough``), so a file of another system or
-version is refused with a message saying so. Writes are atomic.
+the system (``kind``: ``gabor``, ``pca`` or ``hough``) and that system's format version, so a
+file of another system or version is refused with a message saying so. Writes are atomic.
 """
 
 from __future__ import annotations
@@ -21,8 +21,8 @@ from safetensors import SafetensorError
 from calibration_free.errors import BundleError
 from drivers.files import atomic_write_bytes
 
-FORMAT = "finepos-baseline-model"
-_INFO_KEY = "finepos_baseline"
+FORMAT = "finepos-model"
+_INFO_KEY = "finepos_model"
 
 
 def _digest(info_json: str, arrays: dict[str, np.ndarray]) -> str:
@@ -34,16 +34,9 @@ def _digest(info_json: str, arrays: dict[str, np.ndarray]) -> str:
     return h.hexdigest()
 
 
-def write_model(path: str | Path, kind: str, version: int, info: dict[str, Any],
-                arrays: dict[str, np.ndarray]) -> None:
-    """Write a model file atomically.
-
-    Args:
-        path: destination.
-        kind: the system, e.g. "pca".
-        version: that system's model format version.
-        info: JSON-able metadata (no keys "format", "kind", "format_version").
-        arrays: named numeric arrays.
+def pack_model(kind: str, version: int, info: dict[str, Any],
+               arrays: dict[str, np.ndarray]) -> bytes:
+    """The bytes of a model file (see ``write_model``).
 
     Raises:
         BundleError: the metadata is not JSON-serialisable (or not finite).
@@ -52,11 +45,30 @@ def write_model(path: str | Path, kind: str, version: int, info: dict[str, Any],
     try:
         info_json = json.dumps(header, allow_nan=False, sort_keys=True)
     except (TypeError, ValueError) as exc:
-        raise BundleError(f"{path}: cannot serialise the {kind} model's metadata: {exc}") \
-            from exc
+        raise BundleError(f"cannot serialise the {kind} model's metadata: {exc}") from exc
     tensors = {k: np.ascontiguousarray(v) for k, v in arrays.items()}
-    data = safetensors.numpy.save(
+    return safetensors.numpy.save(
         tensors, metadata={_INFO_KEY: info_json, "sha256": _digest(info_json, tensors)})
+
+
+def write_model(path: str | Path, kind: str, version: int, info: dict[str, Any],
+                arrays: dict[str, np.ndarray]) -> None:
+    """Write a model file atomically.
+
+    Args:
+        path: destination.
+        kind: the system, e.g. "gabor" or "pca".
+        version: that system's model format version.
+        info: JSON-able metadata (no keys "format", "kind", "format_version").
+        arrays: named numeric arrays.
+
+    Raises:
+        BundleError: the metadata is not JSON-serialisable (or not finite).
+    """
+    try:
+        data = pack_model(kind, version, info, arrays)
+    except BundleError as exc:
+        raise BundleError(f"{path}: {exc}") from exc
     atomic_write_bytes(path, data)
 
 
@@ -86,10 +98,10 @@ def read_model(path: str | Path, kind: str, version: int) \
         info_json, digest = meta[_INFO_KEY], meta["sha256"]
         info = json.loads(info_json)
     except (UnicodeDecodeError, ValueError, KeyError, TypeError) as exc:
-        raise BundleError(f"{path}: not a finepos baseline model, or a corrupt header "
+        raise BundleError(f"{path}: not a finepos model file, or a corrupt header "
                           f"({exc!r})") from exc
     if not isinstance(info, dict) or info.get("format") != FORMAT:
-        raise BundleError(f"{path}: not a finepos baseline model")
+        raise BundleError(f"{path}: not a finepos model file")
     if info.get("kind") != kind:
         raise BundleError(f"{path}: a {info.get('kind')!r} model, not a {kind!r} model")
     if info.get("format_version") != version:
