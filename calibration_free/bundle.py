@@ -24,13 +24,13 @@ from calibration_free.gabor import GaborConfig
 from calibration_free.localise import Polarity
 from calibration_free.mlp import NumpyMLP
 from calibration_free.model_file import read_model, write_model
-from calibration_free.preprocess import IntensityStats
+from calibration_free.preprocess import Channel, IntensityStats
 from drivers.errors import FineposError
 from drivers.pose import Pose
 from drivers.typed_config import from_mapping, to_mapping
 
 KIND = "gabor"
-FORMAT_VERSION = 2  # 2: localisation.max_elongation
+FORMAT_VERSION = 3  # 2: max_elongation; 3: channel, nominal_uv_px (all under localisation)
 POSE_KEYS = ("x_mm", "y_mm", "z_mm", "o_deg", "a_deg", "t_deg")
 
 
@@ -50,6 +50,9 @@ class ModelBundle:
         expected_area_px: the object's blob area in training images.
         area_tolerance: a blob matches when |area / expected - 1| <= this.
         max_elongation: a blob matches only up to this elongation (the part's shape).
+        channel: the image localisation binarises: "max" or "saturation".
+        nominal_uv_px: where the part appeared at the taught pose (u, v); of several blobs
+            that match the part, one clearly nearest this point is taken.
         gabor: the filter-bank configuration NN2's inputs come from.
         nn1: (u_px, v_px) -> (dx_mm, dy_mm).
         nn2: Gabor features -> (sin(kappa dphi), cos(kappa dphi)).
@@ -68,6 +71,8 @@ class ModelBundle:
     expected_area_px: float
     area_tolerance: float
     max_elongation: float
+    channel: Channel
+    nominal_uv_px: tuple[float, float]
     gabor: GaborConfig
     nn1: NumpyMLP
     nn2: NumpyMLP
@@ -89,6 +94,8 @@ class ModelBundle:
             size = getattr(self, name)
             if isinstance(size, bool) or not isinstance(size, int) or size < 1:
                 raise BundleError(f"{name}: must be a whole number >= 1, got {size!r}")
+        if self.channel not in ("max", "saturation"):
+            raise BundleError(f"channel: must be max or saturation, got {self.channel!r}")
         if self.polarity not in ("bright", "dark"):
             raise BundleError(f"polarity: must be bright or dark, got {self.polarity!r}")
         if not (math.isfinite(self.threshold) and math.isfinite(self.expected_area_px)
@@ -119,7 +126,9 @@ class ModelBundle:
             "localisation": {"threshold": self.threshold, "polarity": self.polarity,
                              "expected_area_px": self.expected_area_px,
                              "area_tolerance": self.area_tolerance,
-                             "max_elongation": self.max_elongation},
+                             "max_elongation": self.max_elongation,
+                             "channel": self.channel,
+                             "nominal_uv_px": list(self.nominal_uv_px)},
             "gabor": to_mapping(self.gabor),
             "training": self.training,
         }
@@ -162,6 +171,8 @@ class ModelBundle:
                 expected_area_px=info["localisation"]["expected_area_px"],
                 area_tolerance=info["localisation"]["area_tolerance"],
                 max_elongation=info["localisation"]["max_elongation"],
+                channel=info["localisation"]["channel"],
+                nominal_uv_px=tuple(float(v) for v in info["localisation"]["nominal_uv_px"]),
                 gabor=from_mapping(GaborConfig, info["gabor"], "gabor"),
                 nn1=NumpyMLP.from_arrays(tensors, "nn1"),
                 nn2=NumpyMLP.from_arrays(tensors, "nn2"),

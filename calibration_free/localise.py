@@ -34,6 +34,9 @@ AREA_TOLERANCE = 0.35
 # Without an expected area, the largest blob is ambiguous if the runner-up has this fraction
 # of its area or more.
 AMBIGUITY_RATIO = 0.8
+# Of several blobs matching the part, the one nearest the taught image position is taken only
+# if it is nearer than this fraction of the runner-up's distance; otherwise: ambiguous.
+NEAREST_RATIO = 0.5
 # Elongation (major / minor axis of the blob's second moments) accepted when no limit is given.
 NO_ELONGATION_LIMIT = float("inf")
 # The histogram path trusts a mask whose bounding box is at most this many times its area
@@ -141,7 +144,8 @@ def otsu_threshold(values: np.ndarray, bins: int = 256) -> float:
 def localise(normalised: np.ndarray, threshold: float, expected_area_px: float | None = None,
              *, polarity: Polarity = "bright", area_tolerance: float = AREA_TOLERANCE,
              min_blob_px: int = MIN_BLOB_PX,
-             max_elongation: float = NO_ELONGATION_LIMIT) -> Localisation:
+             max_elongation: float = NO_ELONGATION_LIMIT,
+             expected_uv: tuple[float, float] | None = None) -> Localisation:
     """Find the object's centre in a normalised image.
 
     Args:
@@ -154,6 +158,9 @@ def localise(normalised: np.ndarray, threshold: float, expected_area_px: float |
         min_blob_px: blobs below this area are ignored as noise.
         max_elongation: a blob matches only if its ``elongation`` is at most this (the
             trained object's shape: a bar does not pass for a cube of the same area).
+        expected_uv: where the part appeared at the taught pose. When several blobs match,
+            the one nearest this point is taken if it is clearly nearest (closer than
+            ``NEAREST_RATIO`` times the runner-up); otherwise the result is ambiguous.
 
     Returns:
         The Localisation; see its docstring for the three statuses.
@@ -183,7 +190,8 @@ def localise(normalised: np.ndarray, threshold: float, expected_area_px: float |
             return Localisation("ok", float(cols @ _coords(cols.size)) / area,
                                 float(rows @ _coords(rows.size)) / area, area, "",
                                 "histogram")
-    return _by_components(mask, expected_area_px, area_tolerance, min_blob_px, max_elongation)
+    return _by_components(mask, expected_area_px, area_tolerance, min_blob_px, max_elongation,
+                          expected_uv)
 
 
 def _single_run(hist: np.ndarray) -> tuple[int, int]:
@@ -211,7 +219,8 @@ def elongation(mask: np.ndarray) -> float:
 
 
 def _by_components(mask: np.ndarray, expected_area_px: float | None, area_tolerance: float,
-                   min_blob_px: int, max_elongation: float) -> Localisation:
+                   min_blob_px: int, max_elongation: float,
+                   expected_uv: tuple[float, float] | None) -> Localisation:
     n, labels, stats, centroids = cv2.connectedComponentsWithStatsWithAlgorithm(
         mask.astype(np.uint8), 8, cv2.CV_32S, cv2.CCL_BBDT)
     areas = stats[1:n, cv2.CC_STAT_AREA].astype(np.float64)
@@ -245,11 +254,15 @@ def _by_components(mask: np.ndarray, expected_area_px: float | None, area_tolera
                 f"no blob within {area_tolerance:.0%} of the expected {expected_area_px:.0f} px"
                 f" (largest: {areas[blobs].max():.0f} px of {blobs.size} blobs)", "components")
         if close.size > 1:
-            found = ", ".join(f"{a:.0f}" for a in areas[close])
-            return Localisation(
-                "ambiguous", None, None, None,
-                f"{close.size} blobs match the expected {expected_area_px:.0f} px ({found} px)",
-                "components")
+            nearest = _clearly_nearest(centroids[close + 1], expected_uv)
+            if nearest is None:
+                found = ", ".join(f"{a:.0f}" for a in areas[close])
+                return Localisation(
+                    "ambiguous", None, None, None,
+                    f"{close.size} blobs match the expected {expected_area_px:.0f} px "
+                    f"({found} px) and none is clearly nearest the taught position",
+                    "components")
+            close = close[nearest:nearest + 1]
         picked = int(close[0])
     u, v = centroids[picked + 1]
     others = blobs.size - 1
@@ -260,3 +273,12 @@ def _by_components(mask: np.ndarray, expected_area_px: float | None, area_tolera
 def _blob_elongation(labels: np.ndarray, stats: np.ndarray, label: int) -> float:
     x, y, w, h = (int(v) for v in stats[label, :4])
     return elongation((labels[y:y + h, x:x + w] == label).astype(np.uint8))
+
+
+def _clearly_nearest(centres: np.ndarray, expected_uv: tuple[float, float] | None) -> int | None:
+    """Index of the centre nearest ``expected_uv`` if it is clearly nearest, else None."""
+    if expected_uv is None:
+        return None
+    d = np.hypot(centres[:, 0] - expected_uv[0], centres[:, 1] - expected_uv[1])
+    order = np.argsort(d)
+    return int(order[0]) if d[order[0]] < NEAREST_RATIO * d[order[1]] else None

@@ -69,6 +69,11 @@ class NumpyMLP:
         if (self.x_std <= 0).any() or (self.y_std <= 0).any():
             raise ValueError("standardisation spreads must be > 0")
 
+    def shifted(self, offset: np.ndarray) -> NumpyMLP:
+        """The same network with ``offset`` subtracted from every output."""
+        return NumpyMLP(self.weights, self.biases, self.x_mean, self.x_std,
+                        self.y_mean - np.asarray(offset, dtype=np.float64), self.y_std)
+
     @property
     def n_inputs(self) -> int:
         return self.weights[0].shape[1]
@@ -139,7 +144,8 @@ def _spread(a: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
 
 def train_mlp(x: np.ndarray, y: np.ndarray, hidden: tuple[int, ...], *, seed: int = 0,
               epochs: int = 1500, target_loss: float = 1e-7,
-              weight_decay: float = 0.0) -> TrainedMLP:
+              weight_decay: float = 0.0,
+              sample_weight: np.ndarray | None = None) -> TrainedMLP:
     """Train a tanh MLP with full-batch Rprop on standardised data.
 
     Args:
@@ -153,6 +159,8 @@ def train_mlp(x: np.ndarray, y: np.ndarray, hidden: tuple[int, ...], *, seed: in
             Rprop descends; the loss curve records the data term only. A few dozen images
             cannot pin down dozens of weights: the penalty makes the network interpolate
             smoothly between the grid's samples instead of memorising them.
+        sample_weight: (N,) positive weights of the samples in the squared error (None:
+            equal). The loss stays a weighted mean, so its scale does not change.
 
     Returns:
         The trained network, its loss curve and the training time.
@@ -169,6 +177,11 @@ def train_mlp(x: np.ndarray, y: np.ndarray, hidden: tuple[int, ...], *, seed: in
                             f"{x.shape} and {y.shape}")
     if not (np.isfinite(x).all() and np.isfinite(y).all()):
         raise TrainingError("training inputs and targets must be finite")
+    if sample_weight is not None:
+        sample_weight = np.asarray(sample_weight, dtype=np.float64)
+        if sample_weight.shape != (x.shape[0],) or not (np.isfinite(sample_weight).all()
+                                                        and (sample_weight > 0).all()):
+            raise TrainingError(f"sample_weight must be {x.shape[0]} positive finite values")
     if not weight_decay >= 0.0:
         raise TrainingError(f"weight_decay must be >= 0, got {weight_decay!r}")
     if not hidden or any(h < 1 for h in hidden):
@@ -185,6 +198,7 @@ def train_mlp(x: np.ndarray, y: np.ndarray, hidden: tuple[int, ...], *, seed: in
         params.append(torch.zeros(n_out, dtype=torch.float64, requires_grad=True))
     xt = torch.from_numpy((x - x_mean) / x_std)
     yt = torch.from_numpy((y - y_mean) / y_std)
+    wt = None if sample_weight is None else torch.from_numpy(sample_weight / sample_weight.sum())
     optimiser = torch.optim.Rprop(params)
     curve: list[float] = []
     threads = torch.get_num_threads()
@@ -197,8 +211,11 @@ def train_mlp(x: np.ndarray, y: np.ndarray, hidden: tuple[int, ...], *, seed: in
             h = xt
             for i in range(0, len(params) - 2, 2):
                 h = torch.tanh(torch.nn.functional.linear(h, params[i], params[i + 1]))
-            loss = torch.nn.functional.mse_loss(
-                torch.nn.functional.linear(h, params[-2], params[-1]), yt)
+            out = torch.nn.functional.linear(h, params[-2], params[-1])
+            if wt is None:
+                loss = torch.nn.functional.mse_loss(out, yt)
+            else:
+                loss = (wt * ((out - yt) ** 2).mean(dim=1)).sum()
             curve.append(loss.item())
             if curve[-1] < target_loss:
                 break

@@ -7,10 +7,12 @@ kappa dphi) -> dphi. The half-loop fast path (``Perception.translation``) stops 
 
 from __future__ import annotations
 
+import dataclasses
 import logging
 import time
 from collections.abc import Mapping
 from dataclasses import dataclass
+from typing import Literal
 
 import cv2
 import numpy as np
@@ -29,7 +31,13 @@ from calibration_free.localise import (
     otsu_threshold,
 )
 from calibration_free.mlp import TrainedMLP, train_mlp
-from calibration_free.preprocess import IntensityStats, image_stats, max_channel_u8, normalise
+from calibration_free.preprocess import (
+    Channel,
+    IntensityStats,
+    image_stats,
+    max_and_saturation_u8,
+    normalise,
+)
 from calibration_free.roi import extract_roi
 from drivers.pose import Pose, ToolStep
 
@@ -41,6 +49,9 @@ NN2_HIDDEN = (12,)
 # cubes 400 steps gave ~1.0 deg RMS on random test poses, 1500 steps ~1.2 deg).
 NN1_EPOCHS = 2000
 NN2_EPOCHS = 1500
+# Training images whose label is this close to zero were taken at the taught pose.
+NOMINAL_TOL_MM = 0.05
+NOMINAL_TOL_DEG = 0.05
 # L2 penalty on NN2's weights: 63 images cannot pin down 36 x 12 weights; without it NN2
 # reads ~0 for any rotation within a few degrees of a grid angle (see mlp.train_mlp).
 NN2_WEIGHT_DECAY = 1e-3
@@ -104,13 +115,19 @@ class Perception:
         self._roi_px = bundle.gabor.roi_px
         self._frame_shape = (bundle.frame_height_px, bundle.frame_width_px)
 
-    def _normalised(self, image: np.ndarray) -> np.ndarray:
-        gray = max_channel_u8(image)
+    def _preprocess(self, image: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """The image the features are taken from and the one localisation binarises: both
+        the normalised max(R, G, B) image, or both the saturation image."""
+        gray, sat = max_and_saturation_u8(image)
         if gray.shape != self._frame_shape:
             raise ImageError(f"image: the bundle was trained on {self._frame_shape[1]}x"
                              f"{self._frame_shape[0]} frames, got {gray.shape[1]}x"
                              f"{gray.shape[0]}")
-        return normalise(gray, self.bundle.intensity)
+        if self.bundle.channel == "saturation":
+            located = sat.astype(np.float32)
+            return located, located
+        normalised = normalise(gray, self.bundle.intensity)
+        return normalised, normalised
 
     def locate(self, image: np.ndarray) -> tuple[np.ndarray, Localisation]:
         """The normalised image and the object's localisation in it.
@@ -118,13 +135,14 @@ class Perception:
         Raises:
             ImageError: the frame is not HxWx3 uint8 of the size the bundle was trained on.
         """
-        normalised = self._normalised(image)
-        return normalised, self._localise(normalised)
+        normalised, located = self._preprocess(image)
+        return normalised, self._localise(located)
 
-    def _localise(self, normalised: np.ndarray) -> Localisation:
+    def _localise(self, located: np.ndarray) -> Localisation:
         b = self.bundle
-        return localise(normalised, b.threshold, b.expected_area_px, polarity=b.polarity,
-                        area_tolerance=b.area_tolerance, max_elongation=b.max_elongation)
+        return localise(located, b.threshold, b.expected_area_px, polarity=b.polarity,
+                        area_tolerance=b.area_tolerance, max_elongation=b.max_elongation,
+                        expected_uv=b.nominal_uv_px)
 
     def translation(self, image: np.ndarray) -> Percept:
         """NN1 only: the corrective translation (the half-loop fast path).
@@ -145,9 +163,9 @@ class Perception:
     def _run(self, image: np.ndarray, rotation: bool) -> Percept:
         clock = time.perf_counter_ns
         t0 = clock()
-        normalised = self._normalised(image)
+        normalised, located = self._preprocess(image)
         t1 = clock()
-        loc = self._localise(normalised)
+        loc = self._localise(located)
         t2 = clock()
         timings = {"preprocess": (t1 - t0) / 1e3, "localise": (t2 - t1) / 1e3}
         if loc.status != "ok":
@@ -201,6 +219,7 @@ class _Prepared:
     """Training images after preprocessing and localisation."""
 
     intensity: IntensityStats
+    channel: Channel
     threshold: float
     expected_area_px: float
     area_tolerance: float
@@ -210,9 +229,26 @@ class _Prepared:
     usable: dict[str, np.ndarray]
 
 
-def _prepare(sets: dict[str, Dataset], polarity: Polarity, image_area_px: int) -> _Prepared:
-    """Intensity statistics, threshold, expected area and localisation of every image."""
-    grays = {name: [max_channel_u8(im) for im in data.images] for name, data in sets.items()}
+def _otsu(images: list[np.ndarray]) -> tuple[float, float]:
+    """Otsu's threshold over (a subsample of) the images, and its separability in [0, 1]."""
+    values = np.concatenate([n[::OTSU_STRIDE, ::OTSU_STRIDE].ravel() for n in images])
+    threshold = otsu_threshold(values)
+    below = values <= threshold
+    if below.all() or not below.any():
+        return threshold, 0.0
+    w0 = below.mean()
+    between = w0 * (1 - w0) * (values[below].mean() - values[~below].mean()) ** 2
+    return threshold, float(between / max(values.var(), 1e-12))
+
+
+def _prepare(sets: dict[str, Dataset], polarity: Polarity, image_area_px: int,
+             channel: Channel | Literal["auto"] = "max") -> _Prepared:
+    """Intensity statistics, localisation channel and threshold, expected area and shape, and
+    the localisation of every image. ``auto`` picks the channel in which the part stands out
+    from its background best (Otsu's separability on the training images)."""
+    split = {name: [max_and_saturation_u8(im) for im in data.images]
+             for name, data in sets.items()}
+    grays = {name: [g for g, _ in pairs] for name, pairs in split.items()}
     per_image = []
     for name, gs in grays.items():
         for i, g in enumerate(gs):
@@ -223,11 +259,21 @@ def _prepare(sets: dict[str, Dataset], polarity: Polarity, image_area_px: int) -
     intensity = IntensityStats(float(np.mean([s.mean for s in per_image])),
                                float(np.mean([s.std for s in per_image])))
     normalised = {name: [normalise(g, intensity) for g in gs] for name, gs in grays.items()}
-    threshold = otsu_threshold(np.concatenate(
-        [n[::OTSU_STRIDE, ::OTSU_STRIDE].ravel() for ns in normalised.values() for n in ns]))
+    candidates = {"max": normalised}
+    if channel in ("saturation", "auto"):
+        candidates["saturation"] = {name: [sat.astype(np.float32) for _, sat in pairs]
+                                    for name, pairs in split.items()}
+        if channel == "saturation":
+            del candidates["max"]
+    otsu = {c: _otsu([n for ns in imgs.values() for n in ns]) for c, imgs in candidates.items()}
+    channel = max(otsu, key=lambda c: otsu[c][1])
+    threshold = otsu[channel][0]
+    located = candidates[channel]
+    logger.info("localisation channel %s (separability %s)", channel,
+                ", ".join(f"{c} {v[1]:.2f}" for c, v in otsu.items()))
 
     def find(name: str, area: float | None) -> list[Localisation]:
-        return [localise(n, threshold, area, polarity=polarity) for n in normalised[name]]
+        return [localise(n, threshold, area, polarity=polarity) for n in located[name]]
 
     # The blob's area changes with the displacement (the camera looks at a tilt: nearer is
     # bigger), so the accepted window spans every training image's area, plus a margin.
@@ -242,14 +288,14 @@ def _prepare(sets: dict[str, Dataset], polarity: Polarity, image_area_px: int) -
     tolerance = min(1.0, (hi - lo) / (hi + lo) + AREA_MARGIN)
     # The trained part's shape: clutter of the right area but another shape (a bar) is not it.
     shapes = [_elongation_of_largest_blob(n, threshold, polarity)
-              for ns in normalised.values() for n in ns]
+              for ns in located.values() for n in ns]
     max_elongation = max(shapes) * ELONGATION_MARGIN
     found = {name: [localise(n, threshold, expected_area, polarity=polarity,
                              area_tolerance=tolerance, max_elongation=max_elongation)
-                    for n in normalised[name]]
+                    for n in located[name]]
              for name in sets}
-    return _Prepared(intensity, threshold, expected_area, tolerance, max_elongation, normalised,
-                     found, {name: _usable(found[name], name) for name in sets})
+    return _Prepared(intensity, channel, threshold, expected_area, tolerance, max_elongation,
+                     located, found, {name: _usable(found[name], name) for name in sets})
 
 
 def _elongation_of_largest_blob(normalised: np.ndarray, threshold: float,
@@ -288,7 +334,8 @@ def train_bundle(nn1_data: Dataset, nn2_data: Dataset, *, object_kind: str, kapp
                  nn2_hidden: tuple[int, ...] = NN2_HIDDEN, seed: int = 0,
                  nn1_extra: Dataset | None = None, polarity: Polarity = "bright",
                  nn1_epochs: int = NN1_EPOCHS, nn2_epochs: int = NN2_EPOCHS,
-                 nn2_weight_decay: float = NN2_WEIGHT_DECAY) -> ModelBundle:
+                 nn2_weight_decay: float = NN2_WEIGHT_DECAY,
+                 localisation_channel: Channel | Literal["auto"] = "auto") -> ModelBundle:
     """Train NN1 and NN2 from image datasets and pack everything into a ModelBundle.
 
     Steps: intensity statistics (mean of the per-image means and standard deviations of the
@@ -312,6 +359,10 @@ def train_bundle(nn1_data: Dataset, nn2_data: Dataset, *, object_kind: str, kapp
         nn1_epochs: NN1's Rprop steps (at most).
         nn2_epochs: NN2's Rprop steps (at most).
         nn2_weight_decay: L2 penalty on NN2's weights (0 = none).
+        localisation_channel: the image the object is binarised and localised in: "max"
+            (normalised max(R, G, B), the paper's), "saturation" (unchanged by light and
+            shadow for a coloured part on a grey table) or "auto" (whichever separates part
+            and background better on the training images).
 
     Raises:
         TrainingError: an argument is invalid, a dataset has no images or the sets' image
@@ -329,7 +380,7 @@ def train_bundle(nn1_data: Dataset, nn2_data: Dataset, *, object_kind: str, kapp
     if nn1_extra is not None:
         sets["nn1_extra"] = nn1_extra
     height, width = _check_sets(sets)
-    prep = _prepare(sets, polarity, height * width)
+    prep = _prepare(sets, polarity, height * width, localisation_channel)
     prep_seconds = time.perf_counter() - start
 
     def centres(name: str) -> list[tuple[float, float]]:
@@ -339,6 +390,20 @@ def train_bundle(nn1_data: Dataset, nn2_data: Dataset, *, object_kind: str, kapp
     uv = np.concatenate([centres(n) for n in nn1_names])
     dxdy = np.concatenate([sets[n].labels[prep.usable[n], :2] for n in nn1_names])
     nn1 = train_mlp(uv, dxdy, NN1_HIDDEN, seed=seed, epochs=nn1_epochs)
+    # The taught pose is where the correction is zero by definition, and the loop settles
+    # where NN1 reads zero: pin NN1's output to zero at the images taken there (a 2-3-2 net
+    # fitted over +/-25 mm otherwise misses that point by a few tenths of a millimetre).
+    labels = np.concatenate([sets[n].labels[prep.usable[n]] for n in nn1_names])
+    at_nominal = (np.hypot(labels[:, 0], labels[:, 1]) < NOMINAL_TOL_MM) \
+        & (np.abs(labels[:, 2]) < NOMINAL_TOL_DEG)
+    nn1_zero_offset = [0.0, 0.0]
+    nominal_uv = tuple(float(v) for v in np.median(uv, axis=0))
+    if at_nominal.any():
+        nominal_uv = tuple(float(v) for v in uv[at_nominal].mean(axis=0))
+        nn1_zero_offset = nn1.model(uv[at_nominal]).mean(axis=0).tolist()
+        nn1 = dataclasses.replace(nn1, model=nn1.model.shifted(nn1_zero_offset))
+    else:
+        logger.warning("no training image at the taught pose: NN1's zero is not pinned")
 
     bank = GaborBank(gabor)
     features = np.stack([bank.features(extract_roi(prep.normalised["nn2"][i], u, v,
@@ -353,7 +418,7 @@ def train_bundle(nn1_data: Dataset, nn2_data: Dataset, *, object_kind: str, kapp
         "samples": {name: len(d) for name, d in sets.items()},
         "skipped": {name: len(sets[name]) - int(prep.usable[name].size) for name in sets},
         "preprocess_seconds": prep_seconds,
-        "nn1": _summary(nn1),
+        "nn1": {**_summary(nn1), "zero_offset_mm": nn1_zero_offset},
         "nn2": _summary(nn2),
         "seconds": time.perf_counter() - start,
         "created_utc": time.strftime("%Y-%m-%dT%H:%M:%SZ", time.gmtime()),
@@ -364,5 +429,6 @@ def train_bundle(nn1_data: Dataset, nn2_data: Dataset, *, object_kind: str, kapp
                        frame_height_px=height, frame_width_px=width,
                        intensity=prep.intensity, threshold=prep.threshold, polarity=polarity,
                        expected_area_px=prep.expected_area_px, area_tolerance=prep.area_tolerance,
-                       max_elongation=prep.max_elongation,
+                       max_elongation=prep.max_elongation, channel=prep.channel,
+                       nominal_uv_px=nominal_uv,
                        gabor=gabor, nn1=nn1.model, nn2=nn2.model, training=training)

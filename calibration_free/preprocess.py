@@ -9,6 +9,7 @@ which removes global gain and offset changes of the lighting (``a * I + b`` with
 from __future__ import annotations
 
 from dataclasses import dataclass
+from typing import Literal
 
 import cv2
 import numpy as np
@@ -55,6 +56,31 @@ def max_channel_u8(image_rgb: np.ndarray) -> np.ndarray:
     check_rgb(image_rgb)
     r, g, b = cv2.split(image_rgb)
     return cv2.max(cv2.max(r, g), b)
+
+
+# The image localisation binarises: the normalised max(R, G, B) (the paper's) or saturation.
+Channel = Literal["max", "saturation"]
+
+# Below this max(R, G, B) (grey levels) saturation is divided by the floor instead: in black
+# the ratio is camera noise over almost nothing.
+SATURATION_FLOOR = 8
+
+
+def max_and_saturation_u8(image_rgb: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """max(R, G, B) and saturation (max - min) / max, both HxW uint8 (saturation 0..255).
+
+    Saturation is the localisation channel that ignores illumination: a coloured part keeps it
+    in the light and in a shadow (the ratio does not change when the light dims), where
+    max(R, G, B) of a shaded face drops to the table's level.
+
+    Raises:
+        ImageError: the image is not HxWx3 uint8.
+    """
+    check_rgb(image_rgb)
+    r, g, b = cv2.split(image_rgb)
+    top = cv2.max(cv2.max(r, g), b)
+    spread = cv2.subtract(top, cv2.min(cv2.min(r, g), b))
+    return top, cv2.divide(spread, cv2.max(top, SATURATION_FLOOR), scale=255)
 
 
 def max_channel(image_rgb: np.ndarray) -> np.ndarray:

@@ -2,20 +2,23 @@
 
 Sections: ``arm``, ``camera``, ``wrench`` (backend ``type`` plus that backend's options, see
 ``controller.devices``), ``scene`` (the simulated cell), ``safety``, ``perception``,
-``controller``. Unknown keys, wrong types and out-of-range values fail at load with the full
-key path. With no file, every default applies: the simulated cell, good light, the cube.
+``controller``, ``service`` (``finepos serve``). Unknown keys, wrong types and out-of-range
+values fail at load with the full key path. With no file, every default applies: the simulated
+cell, good light, the cube.
 """
 
 from __future__ import annotations
 
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any
+from typing import Any, Literal
 
 from calibration_free.gabor import GaborConfig
 from calibration_free.pipeline import NN2_HIDDEN, NN2_WEIGHT_DECAY
 from controller.grasp import GraspConfig
 from controller.positioning import LoopConfig
+from controller.service.config import ServiceConfig
+from controller.teach_spacenav import TeachConfig
 from drivers.errors import ConfigError
 from drivers.safety import SafetyLimits
 from drivers.typed_config import from_mapping, load_yaml_file
@@ -58,6 +61,7 @@ class ControllerConfig:
     grasp: GraspConfig = GraspConfig()
     acquisition: AcquisitionConfig = AcquisitionConfig()
     paths: PathsConfig = PathsConfig()
+    teach: TeachConfig = TeachConfig()
 
 
 @dataclass(frozen=True)
@@ -65,7 +69,10 @@ class PerceptionConfig:
     """Config section ``perception``: the Gabor filter bank and the networks.
 
     nn2_hidden: hidden layer sizes of NN2 (NN1 is the paper's 2-3-2); nn2_weight_decay: L2
-    penalty on NN2's weights, so it interpolates between the grid's angles; seed: training seed;
+    penalty on NN2's weights, so it interpolates between the grid's angles;
+    localisation_channel: the image the part is localised in (``max``: normalised max(R,G,B),
+    the paper's; ``saturation``: unchanged by light and shadow for a coloured part; ``auto``:
+    whichever separates part and table better in the training images); seed: training seed;
     nn1_uses_nn2_set: also train NN1 on the NN2 grid's images (they cost no extra motion and
     make NN1 precise near the nominal pose, where the loop's fixed point is).
     """
@@ -73,6 +80,7 @@ class PerceptionConfig:
     gabor: GaborConfig = GaborConfig()
     nn2_hidden: tuple[int, ...] = field(default=NN2_HIDDEN, metadata={"min": 1})
     nn2_weight_decay: float = field(default=NN2_WEIGHT_DECAY, metadata={"min": 0.0})
+    localisation_channel: Literal["max", "saturation", "auto"] = "auto"
     seed: int = 0
     nn1_uses_nn2_set: bool = True
 
@@ -94,10 +102,11 @@ class FineposConfig:
     safety: SafetyLimits = SafetyLimits()
     perception: PerceptionConfig = PerceptionConfig()
     controller: ControllerConfig = ControllerConfig()
+    service: ServiceConfig = ServiceConfig()
     source: str = "<defaults>"
 
 
-SECTIONS = ("arm", "camera", "wrench", "scene", "safety", "perception", "controller")
+SECTIONS = ("arm", "camera", "wrench", "scene", "safety", "perception", "controller", "service")
 
 
 def config_from_mapping(data: dict[str, Any], source: str = "<mapping>") -> FineposConfig:
@@ -115,6 +124,7 @@ def config_from_mapping(data: dict[str, Any], source: str = "<mapping>") -> Fine
         safety=from_mapping(SafetyLimits, data.get("safety"), "safety"),
         perception=from_mapping(PerceptionConfig, data.get("perception"), "perception"),
         controller=from_mapping(ControllerConfig, data.get("controller"), "controller"),
+        service=from_mapping(ServiceConfig, data.get("service"), "service"),
         source=source,
     )
 

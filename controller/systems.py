@@ -71,7 +71,8 @@ class GaborSystem:
             nn1, nn2, object_kind=state.object_kind, kappa=state.kappa,
             nominal_pose=state.nominal_pose, gabor=perception_cfg.gabor,
             nn2_hidden=tuple(perception_cfg.nn2_hidden),
-            nn2_weight_decay=perception_cfg.nn2_weight_decay, seed=perception_cfg.seed,
+            nn2_weight_decay=perception_cfg.nn2_weight_decay,
+            localisation_channel=perception_cfg.localisation_channel, seed=perception_cfg.seed,
             nn1_extra=nn2 if perception_cfg.nn1_uses_nn2_set else None)
         return TrainedModel("gabor", bundle, time.perf_counter() - t0, len(nn1) + len(nn2),
                             bundle.gabor.n_filters)

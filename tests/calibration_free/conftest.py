@@ -30,6 +30,17 @@ def grids(cell) -> tuple[Dataset, Dataset]:
 
 @pytest.fixture(scope="session")
 def bundle(grids) -> ModelBundle:
+    """The paper's path: localisation and features on normalised max(R, G, B)."""
     nn1_data, nn2_data = grids
     return train_bundle(nn1_data, nn2_data, object_kind="cube", kappa=KAPPA,
-                        nominal_pose=NOMINAL_POSE, nn1_extra=nn2_data, seed=0)
+                        nominal_pose=NOMINAL_POSE, nn1_extra=nn2_data, seed=0,
+                        localisation_channel="max")
+
+
+@pytest.fixture(scope="session")
+def saturation_bundle(grids) -> ModelBundle:
+    """Trained with the channel chosen automatically (saturation, for a yellow part on grey)."""
+    nn1_data, nn2_data = grids
+    return train_bundle(nn1_data, nn2_data, object_kind="cube", kappa=KAPPA,
+                        nominal_pose=NOMINAL_POSE, nn1_extra=nn2_data, seed=0,
+                        localisation_channel="auto")

@@ -134,3 +134,39 @@ def test_training_refuses_unusable_data(grids):
     with pytest.raises(TrainingError, match="nn1: the object was found in only 23 of 63"):
         train_bundle(Dataset(nn1_data.labels, mostly_empty), nn2_data, object_kind="cube",
                      kappa=KAPPA, nominal_pose=NOMINAL_POSE, nn1_epochs=5, nn2_epochs=5)
+
+
+def test_auto_picks_saturation_for_a_coloured_part_on_grey(saturation_bundle, bundle):
+    assert saturation_bundle.channel == "saturation" and bundle.channel == "max"
+
+
+def test_saturation_path_ignores_gain_and_shade(saturation_bundle, cell):
+    """Saturation is unchanged by dimming (gain), where max(R, G, B) of a shaded face is not;
+    an added offset (a*I + b with b > 0) does change it: that invariance is the max path's."""
+    label = np.array([-2.0, 3.0, -25.0])
+    base = Perception(saturation_bundle).perceive(render(cell, label, np.random.default_rng(1)))
+    dim = Perception(saturation_bundle).perceive(render(cell, label, np.random.default_rng(1),
+                                                        gain=0.4))
+    assert base.ok and dim.ok
+    assert np.allclose(dim.nn1_mm, base.nn1_mm, atol=0.1)
+    assert abs(dim.dphi_deg - base.dphi_deg) < 1.0
+
+
+def test_nn1_reads_zero_at_the_taught_pose(bundle, saturation_bundle, cell):
+    for b in (bundle, saturation_bundle):
+        p = Perception(b).perceive(render(cell, np.zeros(3), np.random.default_rng(2)))
+        assert np.hypot(*p.nn1_mm) < 0.05
+        assert b.training["nn1"]["zero_offset_mm"] is not None
+
+
+def test_clearly_nearest_of_two_matching_blobs_is_taken(bundle, cell):
+    """Two identical parts: the one near the taught image position is the part, unless
+    both are about as near (then: ambiguous)."""
+    u0, v0 = bundle.nominal_uv_px
+    near_far = np.maximum(render_at(cell, u0 + 3.0, v0, 0.0), render_at(cell, u0 + 70.0, v0,
+                                                                        30.0))
+    p = Perception(bundle).perceive(near_far)
+    assert p.ok and abs(p.u_px - (u0 + 3.0)) < 1.0
+    both_far = np.maximum(render_at(cell, u0 - 45.0, v0, 0.0), render_at(cell, u0 + 45.0, v0,
+                                                                          30.0))
+    assert Perception(bundle).perceive(both_far).localisation.status == "ambiguous"
