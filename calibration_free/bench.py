@@ -3,7 +3,7 @@
 Example: finepos bench perception --json out/bench-perception.json --frames 2000
 
 Trains a bundle on synthetic cube images (3x3x7 grids, a = 25 mm for NN1 and 5 mm for NN2,
-kappa 4), then times ``Perception.perceive`` (max channel, normalisation, localisation, ROI,
+kappa 4), then times ``Perception.perceive`` (channel split, normalisation, localisation, ROI,
 36 Gabor features, NN1, NN2) on random synthetic frames, and the same path with the features
 computed the obvious way (one ``cv2.filter2D`` per orientation over the whole frame, sampled at
 the nine centres). Everything runs pinned to one core with single-threaded OpenCV, torch and
@@ -143,6 +143,7 @@ def measure(n_frames: int, n_opencv_frames: int, seed: int) -> dict:
         "opencv_median_us": opencv_median,
         "opencv_p99_us": float(np.percentile(opencv_us, 99)),
         "speedup": opencv_median / median,
+        "channel": bundle.channel,
         "frames": n_frames,
         "opencv_frames": n_opencv_frames,
         "frame_shape": list(frames.shape[1:]),
