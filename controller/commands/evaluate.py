@@ -18,7 +18,8 @@ def cmd_evaluate(args) -> int:
     try:
         report = evaluate(args.system, config, trials=args.trials, seed=args.seed,
                           lighting=args.lighting, model_path=args.model,
-                          grasp=not args.no_grasp, log=log, progress=not args.quiet)
+                          grasp=not args.no_grasp, log=log, progress=not args.quiet,
+                          hil=args.hil)
     finally:
         if log:
             log.close()
@@ -36,7 +37,11 @@ def register(subparsers) -> None:
                     "--seed 1 --json out/poor.json\n\nUnless --model is given, first teach, "
                     "acquire and train on the default scene; then test on the scene of "
                     "--config with random part placements and start offsets uniform in "
-                    "+/-25 mm, +/-180/kappa deg.",
+                    "+/-25 mm, +/-180/kappa deg.\n\nExample: finepos evaluate --hil --model "
+                    "state/model-gabor.fpm --trials 20\n\n--hil: hardware in the loop "
+                    "on one machine: the same cell is served in this process over the VAL, ATI "
+                    "and MJPEG emulators, and every arm, camera and wrench exchange goes through "
+                    "the real drivers (placement and ground truth come from the cell).",
         formatter_class=argparse.RawDescriptionHelpFormatter)
     add_config_option(p)
     p.add_argument("--system", default="gabor", choices=sorted(SYSTEMS))
@@ -50,4 +55,6 @@ def register(subparsers) -> None:
     p.add_argument("--states", metavar="FILE", help="write every trial's error trace (JSON)")
     p.add_argument("--no-grasp", action="store_true", help="skip the grasp after positioning")
     p.add_argument("--quiet", action="store_true", help="no progress bars")
+    p.add_argument("--hil", action="store_true",
+                   help="through the real drivers and the device emulators (see above)")
     p.set_defaults(func=cmd_evaluate)

@@ -12,11 +12,20 @@ from controller.commands.common import (
     parse_triple,
     write_json,
 )
+from controller.commands.device_options import add_device_options, apply_device_options
 from controller.devices import open_devices
 from controller.fine_positioner import DATASETS, FinePositioner
 from controller.systems import SYSTEMS
-from drivers.errors import FineposError
+from controller.teach_spacenav import DEFAULT_SIM_START_OFFSET, TeachAborted, teach_with_spacenav
+from drivers.errors import ConfigError
 from drivers.pose import ToolStep
+
+_SPACENAV_ONLY = ("start_offset", "spnav_socket", "timeout_s")
+
+
+def _config(args):
+    """The config file's settings with the command line's device options applied."""
+    return apply_device_options(config_from_args(args), args)
 
 
 def _positioner(args, devices, config, log=None) -> FinePositioner:
@@ -24,15 +33,27 @@ def _positioner(args, devices, config, log=None) -> FinePositioner:
 
 
 def cmd_teach(args) -> int:
-    config = config_from_args(args)
+    config = _config(args)
+    given = [f"--{name.replace('_', '-')}" for name in _SPACENAV_ONLY
+             if getattr(args, name) is not None]
+    if given and args.device != "spacenav":
+        raise ConfigError(f"{given[0]}: only with --device spacenav")
+    start_offset = parse_triple(args.start_offset, "--start-offset") if args.start_offset \
+        else None
     with open_devices(config) as devices:
         fp = _positioner(args, devices, config)
         if args.auto:
             state = fp.teach_auto()
         elif args.device == "spacenav":
-            from controller.teach_spacenav import teach_with_spacenav
-
-            state = teach_with_spacenav(fp, args)
+            try:
+                state = teach_with_spacenav(
+                    fp, start_offset=start_offset, socket_path=args.spnav_socket,
+                    grasp_depth_mm=args.grasp_depth_mm, object_width_mm=args.object_width_mm,
+                    timeout_s=args.timeout_s)
+            except TeachAborted as exc:
+                write_json(None, {"state_file": str(fp.state_path), "aborted": True,
+                                  "reason": str(exc)})
+                return 1
         else:
             state = fp.teach("current", args.grasp_depth_mm, args.object_width_mm)
     write_json(None, {"state_file": str(fp.state_path), "nominal_pose":
@@ -42,7 +63,7 @@ def cmd_teach(args) -> int:
 
 
 def cmd_acquire(args) -> int:
-    config = config_from_args(args)
+    config = _config(args)
     with open_devices(config) as devices:
         fp = _positioner(args, devices, config)
         data = fp.acquire(args.set, seed=args.seed)
@@ -63,17 +84,15 @@ def cmd_train(args) -> int:
 
 
 def cmd_position(args) -> int:
-    config = config_from_args(args)
+    config = _config(args)
+    offset = parse_triple(args.offset, "--offset") if args.offset is not None else None
     with open_devices(config) as devices, iteration_log(args, config) as log:
         fp = _positioner(args, devices, config, log)
         fp.load_model(args.model, args.system)
-        if devices.cell is not None and args.offset is not None:
-            dx, dy, dphi = parse_triple(args.offset, "--offset")
+        if offset is not None:
+            dx, dy, dphi = offset
             fp.move_to(fp.state().nominal_pose.moved_in_tool_frame(
                 ToolStep(-dx, -dy, 0.0, -dphi)))
-        elif args.offset is not None:
-            raise FineposError("--offset places the simulated arm; on a real cell the loop "
-                               "starts where the coarse approach left the arm")
         result = fp.position(args.max_loops)
         report = {"run_id": result.run_id, "outcome": result.outcome, "reason": result.reason,
                   "loops": result.loops, "iterations": result.iterations,
@@ -85,7 +104,7 @@ def cmd_position(args) -> int:
 
 
 def cmd_grasp(args) -> int:
-    config = config_from_args(args)
+    config = _config(args)
     with open_devices(config) as devices:
         result = _positioner(args, devices, config).grasp()
     write_json(None, result.as_dict())
@@ -97,15 +116,27 @@ def register(subparsers) -> None:
         "teach", help="record the nominal grasp pose into the cell's state file",
         description="Example: finepos teach --auto\n\nRecord the nominal pre-grasp pose. "
                     "--auto (simulated cell): place the gripper at the part's true grasp "
-                    "pose; --device spacenav: jog with the 3D mouse, a button records; "
-                    "otherwise the arm's current pose is recorded.",
+                    "pose; --device spacenav: jog with the 3D mouse through spacenavd "
+                    "(controller.teach: button 0 records, button 1 aborts and writes nothing, "
+                    "exit status 1); otherwise the arm's current pose is recorded.\n\n"
+                    "Example: finepos teach --device spacenav --start-offset 4,-3,5",
         formatter_class=argparse.RawDescriptionHelpFormatter)
     add_config_option(p)
+    add_device_options(p)
     how = p.add_mutually_exclusive_group()
     how.add_argument("--auto", action="store_true", help="simulated cell: the true pose")
     how.add_argument("--device", choices=["spacenav"], help="jog with a 3D mouse")
     p.add_argument("--grasp-depth-mm", type=float, help="descent from the pose to grip")
     p.add_argument("--object-width-mm", type=float, help="finger width when holding the part")
+    default_offset = ",".join(f"{v:g}" for v in DEFAULT_SIM_START_OFFSET)
+    p.add_argument("--start-offset", metavar="DX,DY,DPHI",
+                   help="spacenav on the simulated cell: start this far from the grasp pose "
+                        f"(mm, mm, deg; default {default_offset})")
+    p.add_argument("--spnav-socket", metavar="PATH",
+                   help="spacenavd's socket (default: controller.teach.socket_path, "
+                        "$SPNAV_SOCKET, /var/run/spnav.sock)")
+    p.add_argument("--timeout-s", type=float,
+                   help="spacenav: give up after this long without a record (nothing written)")
     p.set_defaults(func=cmd_teach)
 
     p = subparsers.add_parser(
@@ -115,6 +146,7 @@ def register(subparsers) -> None:
                     "test set, and store the dataset under the state folder.",
         formatter_class=argparse.RawDescriptionHelpFormatter)
     add_config_option(p)
+    add_device_options(p)
     p.add_argument("--set", required=True, choices=DATASETS)
     p.add_argument("--seed", type=int, default=0, help="seed of the random test set")
     p.set_defaults(func=cmd_acquire)
@@ -131,14 +163,20 @@ def register(subparsers) -> None:
     p = subparsers.add_parser(
         "position", help="run the fine-positioning loop (and optionally grasp)",
         description="Example: finepos position --offset 12,-8,20 --grasp\n\nRun the half/full "
-                    "loop from where the arm is; on the simulated cell --offset first "
-                    "displaces the arm from the taught pose (mm, mm, deg).",
+                    "loop from where the arm is; --offset first moves the arm to the taught "
+                    "pose displaced by it (mm, mm, deg; through the safety layer).\n\n"
+                    "Hardware in the loop (after finepos sim val-emulator --ati --mjpeg 0):\n"
+                    "  finepos position --arm val --port /dev/pts/3 --wrench ati "
+                    "--wrench-port /dev/pts/4\n"
+                    "    --camera http://127.0.0.1:8080/stream.mjpg --offset 12,-8,20 --grasp",
         formatter_class=argparse.RawDescriptionHelpFormatter)
     add_config_option(p)
+    add_device_options(p)
     add_log_option(p)
     p.add_argument("--system", default="gabor", choices=sorted(SYSTEMS))
     p.add_argument("--model", metavar="FILE", help="model file (default: the state folder's)")
-    p.add_argument("--offset", metavar="DX,DY,DPHI", help="simulated cell: start offset")
+    p.add_argument("--offset", metavar="DX,DY,DPHI",
+                   help="first move to the taught pose displaced by this (mm, mm, deg)")
     p.add_argument("--max-loops", type=float, help="loop budget (default from config)")
     p.add_argument("--grasp", action="store_true", help="grasp after converging")
     p.set_defaults(func=cmd_position)
@@ -149,4 +187,5 @@ def register(subparsers) -> None:
                     "verify the grip, lift.",
         formatter_class=argparse.RawDescriptionHelpFormatter)
     add_config_option(p)
+    add_device_options(p)
     p.set_defaults(func=cmd_grasp)

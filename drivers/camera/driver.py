@@ -1,10 +1,11 @@
 """Camera driver over OpenCV's VideoCapture: device index, file, or stream URL (MJPEG over HTTP).
 
-``grab()`` returns the first frame that arrives after the call (so a frame taken after the arm
-stopped, never one buffered before), converted to 192 x 144 RGB (resized if the source differs),
-stamped with its arrival time. No frame within ``config.timeout_s`` raises DeviceTimeoutError
-and puts the camera into FAULT until ``reset()`` reopens the source. ``stats`` counts frames
-received, failed reads and frames estimated dropped.
+``grab()`` returns the first frame that arrives at least ``config.settle_s`` after the call, so
+a frame taken after the arm stopped (never one buffered before, nor one still on its way through
+the stream's encoding, transfer and decoding), converted to 192 x 144 RGB (resized if the source
+differs), stamped with its arrival time. No frame within ``config.timeout_s`` (after the settle
+time) raises DeviceTimeoutError and puts the camera into FAULT until ``reset()`` reopens the
+source. ``stats`` counts frames received, failed reads and frames estimated dropped.
 
 OpenCV's FFmpeg backend (in opencv-python-headless) opens ``multipart/x-mixed-replace`` MJPEG
 streams over HTTP directly, so stream URLs need no separate code path.
@@ -47,7 +48,9 @@ class OpenCvCamera(Camera):
 
     def _grab(self) -> Frame:
         assert self._reader is not None
-        frame = self._reader.next_frame(time.monotonic(), self.config.timeout_s)
+        settle_s = 0.0 if self._reader.on_demand else self.config.settle_s
+        frame = self._reader.next_frame(time.monotonic() + settle_s,
+                                        self.config.timeout_s + settle_s)
         if frame is None:
             message = (f"camera {self.config.source!r}: no frame within "
                        f"{self.config.timeout_s} s ({self._reader.stats})")

@@ -75,6 +75,11 @@ class FrameReader:
         self._thread = threading.Thread(target=self._run, name="camera-reader", daemon=True)
 
     @property
+    def on_demand(self) -> bool:
+        """A video file, read one frame per request (arrival times follow the requests)."""
+        return self._on_demand
+
+    @property
     def stats(self) -> FrameStats:
         with self._changed:
             return FrameStats(self._received, self._failed_reads, self._drops.dropped)

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import itertools
+import time
 
 import cv2
 import numpy as np
@@ -65,6 +66,16 @@ def test_grab_returns_a_frame_that_arrived_after_the_call(server):
         assert cam.stats.received >= 3 and cam.stats.failed_reads == 0
     stamps = [f.timestamp_s for f in frames]
     assert stamps == sorted(stamps) and len(set(stamps)) == 3
+
+
+def test_grab_skips_frames_arriving_within_the_settle_time(server):
+    # a frame arriving sooner after the call may have been exposed before it (stream latency)
+    settle_s = 0.15
+    with OpenCvCamera(OpenCvCameraConfig(source=server.stream_url, settle_s=settle_s)) as cam:
+        cam.grab()
+        called_s = time.monotonic()
+        frame = cam.grab()
+    assert frame.timestamp_s >= called_s + settle_s
 
 
 def test_stalled_stream_times_out_into_fault_until_reset(server):
