@@ -28,12 +28,19 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--port", type=int, default=0, help="TCP port (default 0: any free)")
     parser.add_argument("--fps", type=float, default=10.0, help="frame rate (default 10)")
     parser.add_argument("--source", help="relay this OpenCV source instead of the simulation")
+    parser.add_argument("--jpeg-quality", type=int, default=95, choices=range(1, 101),
+                        metavar="1..100", help="JPEG quality (default 95)")
+    parser.add_argument("--chroma", choices=["444", "420"], default="444",
+                        help="JPEG chroma subsampling (default 444; many network cameras send "
+                             "420, which biases saturation-channel localisation by ~0.2 mm)")
 
 
 def run(args: argparse.Namespace) -> int:
     with contextlib.ExitStack() as stack:
         camera = stack.enter_context(_camera(args, stack))
-        server = stack.enter_context(MjpegServer(camera, port=args.port, fps=args.fps))
+        server = stack.enter_context(MjpegServer(camera, port=args.port, fps=args.fps,
+                                                 jpeg_quality=args.jpeg_quality,
+                                                 chroma=args.chroma))
         print(server.stream_url, server.snapshot_url, flush=True)
         wait_for_stop_signal()
     return 0
