@@ -19,6 +19,8 @@ COMMAND_MODULES = (
     "controller.commands.demo",
     "controller.commands.sim",
     "controller.commands.bench",
+    "controller.commands.serve",
+    "controller.commands.ctl",
     "controller.commands.table1",
     "controller.commands.filter_search",
 )

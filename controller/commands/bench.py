@@ -6,6 +6,7 @@ LEAVES = {
     "val": "sim_backend.val_emulator.bench",
     "sim": "sim_backend.bench",
     "perception": "calibration_free.bench",
+    "service": "controller.service.bench",
     "ati": "sim_backend.ati_emulator_bench",
     "camera-stream": "sim_backend.mjpeg_bench",
 }

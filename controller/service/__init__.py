@@ -1,0 +1,61 @@
+"""The controller service (``finepos serve``) and its control API.
+
+One long-running process owns the configured devices (the simulated cell unless configured
+otherwise) and a FinePositioner, keeps one state machine (``states``) and runs one job at a time
+in a worker thread. People and programs command it over a UNIX socket; ``finepos ctl`` is the
+command-line client, ``client.ServiceClient`` the Python one.
+
+Protocol: JSON lines. Each request is one UTF-8 JSON object on one line (at most
+``service.max_request_bytes``, newline included); each gets exactly one response line, in order::
+
+    {"id": 7, "cmd": "position", "args": {"max_loops": 4, "wait": true}}
+    {"id": 7, "ok": true, "result": {"job": {"id": 3, "kind": "position", "outcome": "done", ...}}}
+    {"id": null, "ok": false, "error": {"code": "bad_json", "message": "not a JSON request: ..."}}
+
+``id`` (optional: a string of at most 64 characters, an integer or null) is echoed; ``args`` is
+optional. Error codes are listed in ``protocol.ERROR_CODES`` (too_large, bad_json, bad_request,
+unknown_command, unauthorized, too_many_clients, not_ready, busy, fault, stopping, failed). A bad
+request never ends the connection.
+
+Commands (arguments, types, ranges and defaults in ``commands.COMMANDS``):
+
+- ``status``: state, since, reason, pid, uptime_s, job (running), last_job (with outcome,
+  reason, result), pose (last read or reached, with its time), last_iteration (the latest
+  iteration record), model (system, file, train images), fault (reason, since, devices not
+  active, reconnected, reconnect_attempts), config (source, last_reload), iteration_log, clients;
+- jobs, refused unless idle (``busy``, ``fault``, ``not_ready``, ``stopping``): ``teach``
+  (``auto``: simulated cell only; otherwise the current pose, needing ``grasp_depth_mm`` and
+  ``object_width_mm`` on a real cell), ``acquire`` (``set``: nn1 | nn2 | test, ``seed``),
+  ``train`` (``system``), ``position`` (``max_loops``; ``offset`` [dx_mm, dy_mm, dphi_deg]:
+  simulated cell only), ``grasp``. Each takes ``wait``: false (default) answers when the job has
+  started, true when it has ended; the job's ``outcome`` is done, failed (the reason says why,
+  e.g. ``no_object: ...`` or ``grasp failed: excessive force ...``), aborted, or fault;
+- ``abort``: preempts the running job (no further motion command is sent) and halts the arm;
+- ``reload``: loads the model of ``system`` from the state folder (a bad one is refused and
+  the old one stays in use);
+- ``reset``: in fault, reconnects the devices that are not active, reads each device once and
+  returns to idle; refused (``fault``) while the cause is still there;
+- ``stream``: answers once, then sends events, one per line, until the client disconnects:
+  ``{"event": "iteration", "record": {...}}`` (the iteration log's records),
+  ``{"event": "state", "state": ..., "previous": ..., "reason": ..., "time": ...}``,
+  ``{"event": "dropped", "count": N}`` (the client read too slowly; the log file has them all),
+  ``{"event": "end", ...}`` when the service stops;
+- ``auth`` (``token``): the first request on a TCP connection.
+
+Security: the socket is created with mode 0660 and group ``service.socket_group``; each peer's
+credentials (SO_PEERCRED, SO_PEERGROUPS) must match the service's own user,
+``service.allowed_users`` or ``service.allowed_groups``, else it gets one ``unauthorized`` line
+and is disconnected. There is no network listener unless ``service.tcp`` is configured; that one
+binds to loopback only and requires ``auth`` with the token from ``service.tcp.token_file``.
+
+systemd: READY=1 once serving, STATUS= on every state change, WATCHDOG=1 from the control loop,
+STOPPING=1 on shutdown (``sd_notify``). SIGTERM halts and stops; SIGHUP reloads the config and
+the model (``config_reload`` says what may change live).
+
+Modules: ``service`` (the Service: state, jobs, control loop), ``server`` and ``connection``
+(the socket side), ``protocol`` and ``commands`` (wire format and validation), ``listeners``,
+``peer`` (who may connect), ``jobs`` and ``model_slot`` (what jobs do), ``job_arm`` (the
+preemptible arm), ``cell_connection`` (devices: open, recover, probe), ``events`` (the stream),
+``states``, ``backoff``, ``watchdog``, ``sd_notify``, ``signals``, ``config`` (the ``service:``
+config section), ``config_reload``, ``client``, ``bench`` (``finepos bench service``).
+"""

@@ -1,0 +1,78 @@
+"""Config section ``service:``: where the control socket is, who may use it, how faults recover.
+
+Loaded strictly like every other section (``drivers.typed_config``). User and group names are
+resolved when the service starts (``controller.service.peer``), not at load, so a config can be
+checked on a machine without those accounts.
+"""
+
+from __future__ import annotations
+
+import ipaddress
+from dataclasses import dataclass, field
+
+_POSITIVE = {"min": 0.0, "exclusive_min": True}
+
+
+@dataclass(frozen=True)
+class TcpConfig:
+    """The optional TCP listener (``service.tcp``): off unless configured.
+
+    host: must be a loopback address (127.0.0.1 or ::1); port: 1..65535;
+    token_file: a file holding the shared token (at least 16 characters, the first line is used);
+    it must not be readable by group or others. Every TCP connection must first send
+    ``{"cmd": "auth", "args": {"token": ...}}``.
+    """
+
+    port: int = field(metadata={"min": 1, "max": 65535})
+    token_file: str
+    host: str = "127.0.0.1"
+
+    def __post_init__(self) -> None:
+        try:
+            loopback = ipaddress.ip_address(self.host).is_loopback
+        except ValueError as exc:
+            raise ValueError(f"host: expected an IP address, got {self.host!r}") from exc
+        if not loopback:
+            raise ValueError(f"host: the TCP listener must be bound to loopback, got {self.host!r}")
+        if not self.token_file.strip():
+            raise ValueError("token_file: must name the token file")
+
+
+@dataclass(frozen=True)
+class ServiceConfig:
+    """Config section ``service``: the long-running controller (``finepos serve``).
+
+    socket_path: the UNIX control socket (``--socket`` overrides it); created with mode 0660;
+    socket_group: group owning the socket (name or number; None: the service's own group);
+    allowed_users / allowed_groups: peers (checked with SO_PEERCRED) allowed besides the
+    service's own user; names or numeric ids; a peer is allowed when its uid is listed or its
+    primary or a supplementary group is;
+    max_request_bytes: longest request line; max_clients: connections served at once;
+    idle_poll_s: while idle, read the arm's pose this often to notice a lost link (0: never);
+    reconnect_initial_s / reconnect_max_s: backoff between reconnection attempts after a fault
+    (doubling from the first to the second);
+    stall_timeout_s: one arm command running longer than this withholds the systemd watchdog
+    ping, so systemd restarts a hung service (keep it above the arm's own move timeout);
+    stop_timeout_s: on shutdown, how long to wait for an aborted job before closing the ports;
+    tcp: the optional loopback TCP listener (None: no network listener).
+    """
+
+    socket_path: str = "/run/finepos/finepos.sock"
+    socket_group: int | str | None = None
+    allowed_users: tuple[int | str, ...] = ()
+    allowed_groups: tuple[int | str, ...] = ()
+    max_request_bytes: int = field(default=16384, metadata={"min": 512, "max": 1 << 20})
+    max_clients: int = field(default=32, metadata={"min": 1, "max": 1024})
+    idle_poll_s: float = field(default=2.0, metadata={"min": 0.0})
+    reconnect_initial_s: float = field(default=0.5, metadata=_POSITIVE)
+    reconnect_max_s: float = field(default=30.0, metadata=_POSITIVE)
+    stall_timeout_s: float = field(default=180.0, metadata=_POSITIVE)
+    stop_timeout_s: float = field(default=2.0, metadata=_POSITIVE)
+    tcp: TcpConfig | None = None
+
+    def __post_init__(self) -> None:
+        if not self.socket_path.strip():
+            raise ValueError("socket_path: must name the control socket")
+        if self.reconnect_max_s < self.reconnect_initial_s:
+            raise ValueError("reconnect_max_s must be at least reconnect_initial_s, got "
+                             f"{self.reconnect_max_s} / {self.reconnect_initial_s}")

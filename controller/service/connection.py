@@ -1,0 +1,145 @@
+"""One client connection: read request lines, answer each, or turn into an event stream.
+
+Every line gets exactly one response line. A TCP connection must authenticate first
+(``auth`` with the token, within AUTH_TIMEOUT_S; anything else, or a wrong token, is answered
+``unauthorized`` and the connection closed). ``stream`` answers once, then sends events until
+the client or the service goes away; a stream connection takes no further requests (what the
+client sends is discarded).
+Errors in a request never end the connection; an unexpected error in the service is logged with
+its traceback and answered ``failed``.
+"""
+
+from __future__ import annotations
+
+import hmac
+import logging
+import socket
+import threading
+from typing import Any, Protocol
+
+from controller.service.events import Subscription
+from controller.service.protocol import (
+    TOO_LARGE,
+    LineReader,
+    Request,
+    RequestError,
+    decode,
+    error_line,
+    event_line,
+    ok_line,
+    parse_request,
+    request_id,
+)
+
+logger = logging.getLogger(__name__)
+
+STREAM_POLL_S = 0.5  # how often an idle stream checks whether its client or the service left
+AUTH_TIMEOUT_S = 10.0  # a TCP connection that has not authenticated by then is closed
+
+
+class RequestHandler(Protocol):
+    """What a connection needs from the service."""
+
+    def handle(self, request: Request) -> dict[str, Any]: ...
+
+    def subscribe(self) -> Subscription: ...
+
+
+class Connection:
+    """Serves one accepted socket until it closes (``serve`` runs in the connection's thread)."""
+
+    def __init__(self, sock: socket.socket, name: str, handler: RequestHandler, max_bytes: int,
+                 closing: threading.Event, token: str | None = None) -> None:
+        self.sock = sock
+        self.name = name
+        self._handler = handler
+        self._reader = LineReader(sock, max_bytes)
+        self._max_bytes = max_bytes
+        self._closing = closing
+        self._token = token  # None: authenticated by its peer credentials already
+        if token is not None:
+            sock.settimeout(AUTH_TIMEOUT_S)
+
+    def serve(self) -> None:
+        try:
+            self._serve()
+        except OSError as exc:  # the client went away mid-write, or the server shut us down
+            logger.debug("%s: connection ended: %s", self.name, exc)
+
+    def _serve(self) -> None:
+        while not self._closing.is_set():
+            line = self._reader.read()
+            if line is None:
+                return
+            if line is TOO_LARGE:
+                self._send(error_line(None, "too_large",
+                                      f"request longer than {self._max_bytes} bytes"))
+                continue
+            data = None
+            try:
+                data = decode(line)
+                request = parse_request(data)
+            except RequestError as exc:
+                self._send(error_line(request_id(data), exc.code, exc.message))
+                if self._token is not None:
+                    return  # not authenticated: no second chance on this connection
+                continue
+            if self._token is not None:
+                if not self._authenticate(request):
+                    return
+                continue
+            if request.cmd == "stream":
+                self._stream(request.id)
+                return
+            if request.cmd == "auth":
+                self._send(ok_line(request.id, {"authenticated": True}))
+                continue
+            self._send(self._answer(request))
+
+    def _answer(self, request: Request) -> bytes:
+        try:
+            return ok_line(request.id, self._handler.handle(request))
+        except RequestError as exc:
+            return error_line(request.id, exc.code, exc.message)
+        except Exception as exc:  # a bug must not take the service down with the connection
+            logger.exception("%s: %s failed", self.name, request.cmd)
+            return error_line(request.id, "failed", f"internal error: {type(exc).__name__}: "
+                                                    f"{exc}")
+
+    def _authenticate(self, request: Request) -> bool:
+        token = self._token or ""
+        if request.cmd == "auth" and hmac.compare_digest(request.args["token"].encode(),
+                                                         token.encode()):
+            self._token = None
+            self.sock.settimeout(None)
+            self._send(ok_line(request.id, {"authenticated": True}))
+            return True
+        logger.warning("%s: refused: %s", self.name, "wrong token" if request.cmd == "auth"
+                       else "no auth before the first request")
+        self._send(error_line(request.id, "unauthorized",
+                              'authenticate first: {"cmd": "auth", "args": {"token": ...}}'))
+        return False
+
+    def _stream(self, rid: str | int | None) -> None:
+        subscription = self._handler.subscribe()
+        try:
+            self._send(ok_line(rid, {"streaming": True}))
+            while not self._closing.is_set():
+                event = subscription.get(STREAM_POLL_S)
+                if event is not None:
+                    self._send(event_line(event))
+                elif self._client_left() and not self._closing.is_set():
+                    return  # (when closing, the server shut our reading side: not the client)
+            self._send(event_line({"event": "end", "reason": "service stopping"}))
+        finally:
+            subscription.close()
+
+    def _client_left(self) -> bool:
+        """Discard what the client sent; True once it closed its end."""
+        try:
+            return self.sock.recv(4096, socket.MSG_DONTWAIT) == b""
+        except BlockingIOError:
+            return False
+
+    def _send(self, data: bytes) -> None:
+        self.sock.sendall(data)

@@ -1,0 +1,71 @@
+"""Fan-out of stream events (iteration records, state changes) to the streaming clients.
+
+Publishing never blocks the publisher (the control loop writing its iteration log): each
+subscriber has a bounded queue; when a slow client lets it fill up, further events are counted
+and the client receives one ``{"event": "dropped", "count": N}`` before the next event it gets.
+The iteration log file on disk has every record regardless.
+"""
+
+from __future__ import annotations
+
+import queue
+import threading
+from typing import Any
+
+QUEUE_EVENTS = 1000
+
+
+class Subscription:
+    """One client's queue; ``get`` returns the next event or None after ``timeout_s``."""
+
+    def __init__(self, hub: EventHub, size: int) -> None:
+        self._hub = hub
+        self._queue: queue.Queue[dict[str, Any]] = queue.Queue(size)
+        self._dropped = 0
+        self._lock = threading.Lock()
+
+    def put(self, event: dict[str, Any]) -> None:
+        try:
+            self._queue.put_nowait(event)
+        except queue.Full:
+            with self._lock:
+                self._dropped += 1
+
+    def get(self, timeout_s: float) -> dict[str, Any] | None:
+        with self._lock:
+            dropped, self._dropped = self._dropped, 0
+        if dropped:
+            return {"event": "dropped", "count": dropped}
+        try:
+            return self._queue.get(timeout=timeout_s)
+        except queue.Empty:
+            return None
+
+    def close(self) -> None:
+        self._hub.unsubscribe(self)
+
+
+class EventHub:
+    """Subscribers by identity; thread-safe."""
+
+    def __init__(self, queue_events: int = QUEUE_EVENTS) -> None:
+        self._queue_events = queue_events
+        self._subscribers: list[Subscription] = []
+        self._lock = threading.Lock()
+
+    def subscribe(self) -> Subscription:
+        subscription = Subscription(self, self._queue_events)
+        with self._lock:
+            self._subscribers.append(subscription)
+        return subscription
+
+    def unsubscribe(self, subscription: Subscription) -> None:
+        with self._lock:
+            if subscription in self._subscribers:
+                self._subscribers.remove(subscription)
+
+    def publish(self, event: dict[str, Any]) -> None:
+        with self._lock:
+            subscribers = list(self._subscribers)
+        for subscription in subscribers:
+            subscription.put(event)

@@ -1,0 +1,113 @@
+"""The arm as the service's jobs see it: preemptible, with its last pose and its command in flight.
+
+``PreemptibleArm`` wraps the configured Arm and offers the same public methods (the library code
+only calls those). Once ``preempt()`` was called, every motion command is refused with
+MotionRejectedError("aborted") before anything is sent, so an abort stops acquisition, teach-in
+and the grasp at their next move as well as the positioning loop; ``resume()`` (at the start of
+the next job) lifts that. ``halt()`` is passed straight through, also while preempted.
+
+It also remembers the last pose read or reached (so ``status`` needs no serial exchange) and
+since when the current command has been running (so the watchdog can tell a hung command).
+"""
+
+from __future__ import annotations
+
+import threading
+import time
+from collections.abc import Callable
+from typing import TypeVar
+
+from drivers.errors import MotionRejectedError
+from drivers.interfaces import Arm, Lifecycle, Motion
+from drivers.pose import Pose, ToolStep
+from drivers.safety import SafetyLimits
+
+T = TypeVar("T")
+
+
+class PreemptibleArm:
+    """Delegates to ``arm``; see the module docstring."""
+
+    def __init__(self, arm: Arm) -> None:
+        self.inner = arm
+        self._preempted = threading.Event()
+        self._busy_since: float | None = None
+        self._last_pose: tuple[Pose, float] | None = None
+
+    # -- preemption and bookkeeping ----------------------------------------------------------
+    def preempt(self) -> None:
+        """Refuse every motion command from now on (thread-safe)."""
+        self._preempted.set()
+
+    def resume(self) -> None:
+        self._preempted.clear()
+
+    def last_pose(self) -> tuple[Pose, float] | None:
+        """The last pose read or reached and when (UNIX time), or None before the first."""
+        return self._last_pose
+
+    def busy_for_s(self) -> float:
+        """How long the command now running has been running (0 when none is)."""
+        since = self._busy_since
+        return 0.0 if since is None else time.monotonic() - since
+
+    def _run(self, call: Callable[[], T]) -> T:
+        self._busy_since = time.monotonic()
+        try:
+            return call()
+        finally:
+            self._busy_since = None
+
+    def _move(self, call: Callable[[], T]) -> T:
+        if self._preempted.is_set():
+            raise MotionRejectedError("aborted")
+        return self._run(call)
+
+    def _seen(self, pose: Pose) -> Pose:
+        self._last_pose = (pose, time.time())
+        return pose
+
+    # -- the Arm's public methods ------------------------------------------------------------
+    @property
+    def state(self) -> Lifecycle:
+        return self.inner.state
+
+    @property
+    def fault_reason(self) -> str | None:
+        return self.inner.fault_reason
+
+    @property
+    def limits(self) -> SafetyLimits | None:
+        return self.inner.limits
+
+    def pose(self) -> Pose:
+        return self._seen(self._run(self.inner.pose))
+
+    def tool_rotation_deg(self) -> float:
+        return self.pose().approach_rotation_deg
+
+    def move_to(self, target: Pose) -> Motion:
+        motion = self._move(lambda: self.inner.move_to(target))
+        self._seen(motion.pose)
+        return motion
+
+    def move_tool(self, step: ToolStep) -> Motion:
+        motion = self._move(lambda: self.inner.move_tool(step))
+        self._seen(motion.pose)
+        return motion
+
+    def set_speed(self, percent: float) -> None:
+        self._move(lambda: self.inner.set_speed(percent))
+
+    def open_gripper(self) -> float:
+        return self._move(self.inner.open_gripper)
+
+    def close_gripper(self) -> float:
+        return self._move(self.inner.close_gripper)
+
+    def finger_width_mm(self) -> float:
+        return self._run(self.inner.finger_width_mm)
+
+    def halt(self) -> None:
+        """Stop any motion now (not refused while preempted: this is what an abort sends)."""
+        self.inner.halt()

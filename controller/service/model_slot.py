@@ -1,0 +1,47 @@
+"""The model in use by the service's positioning jobs, and what ``status`` says about it."""
+
+from __future__ import annotations
+
+import threading
+import time
+from pathlib import Path
+from typing import Any
+
+from controller.fine_positioner import FinePositioner
+from controller.systems import TrainedModel
+
+DEFAULT_SYSTEM = "gabor"
+
+
+class ModelSlot:
+    """The model the positioning loop uses, and what status reports about it (thread-safe)."""
+
+    def __init__(self) -> None:
+        self._lock = threading.Lock()
+        self._model: TrainedModel | None = None
+        self._info: dict[str, Any] | None = None
+
+    @property
+    def model(self) -> TrainedModel | None:
+        return self._model
+
+    def info(self) -> dict[str, Any] | None:
+        with self._lock:
+            return dict(self._info) if self._info else None
+
+    def set(self, model: TrainedModel, path: Path) -> None:
+        with self._lock:
+            self._model = model
+            self._info = {"system": model.system, "file": str(path),
+                          "train_images": model.train_images,
+                          "feature_count": model.feature_count, "loaded_at": time.time()}
+
+    def load(self, fp: FinePositioner, system: str) -> TrainedModel:
+        """Load ``system``'s model from the state folder into use (the old one stays on error)."""
+        model = fp.load_model(system=system)
+        self.set(model, fp.model_path(system))
+        return model
+
+    def require(self, fp: FinePositioner) -> TrainedModel:
+        """The model in use, loading the default system's on first need."""
+        return self._model or self.load(fp, DEFAULT_SYSTEM)

@@ -1,0 +1,471 @@
+"""The controller service: one process owning the cell's devices, commanded over the control socket.
+
+Threads and what they do:
+
+- the control loop (the thread calling ``run``; the main thread under ``finepos serve``) starts
+  everything, then every tick carries out a pending config reload, retries the devices with
+  backoff while in fault, reads the arm's pose while idle (noticing a lost link), and pings the
+  systemd watchdog: only while it runs and no arm command has hung beyond
+  ``service.stall_timeout_s``. On stop it aborts the job, then closes the server, the devices and
+  the iteration log, in that order;
+- the worker: one thread per job, one job at a time, holding the device lock;
+- the server's accept and connection threads, which call ``handle``.
+
+``stop`` and ``request_reload`` only set events, so signal handlers may call them. Locks are
+taken in one order: the device lock before the state lock, never the other way round.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import json
+import logging
+import os
+import threading
+import time
+from collections.abc import Callable
+from pathlib import Path
+from typing import Any
+
+from controller.devices import open_devices
+from controller.fine_positioner import FinePositioner
+from controller.iteration_log import IterationLog
+from controller.service.backoff import Backoff
+from controller.service.cell_connection import CellConnection, DeviceOpener
+from controller.service.commands import JOB_COMMANDS
+from controller.service.config_reload import restart_only_changes
+from controller.service.events import EventHub, Subscription
+from controller.service.jobs import BODIES, DEVICE_ERRORS, Job, JobContext, JobFailed, classify
+from controller.service.listeners import read_token
+from controller.service.model_slot import DEFAULT_SYSTEM, ModelSlot
+from controller.service.peer import PeerPolicy
+from controller.service.protocol import Request, RequestError
+from controller.service.sd_notify import Notifier
+from controller.service.server import ControlServer
+from controller.service.states import JOB_STATES, State, StateMachine
+from controller.service.watchdog import WatchdogPinger
+from drivers.errors import ConfigError, FineposError
+from drivers.typed_config import to_mapping
+
+logger = logging.getLogger(__name__)
+
+ITERATION_LOG_NAME = "iterations.jsonl"
+TICK_S = 0.5  # longest sleep of the control loop (it wakes at once for stop, reload, job end)
+_REFUSAL_CODES = {State.STARTING: "not_ready", State.FAULT: "fault", State.STOPPING: "stopping"}
+
+
+class Service:
+    """See the module docstring. ``reload_config`` re-reads the config file (None: no file, so
+    a reload keeps the config and reloads the model only)."""
+
+    def __init__(self, config, *, socket_path: str | Path | None = None,
+                 opener: DeviceOpener = open_devices, notifier: Notifier | None = None,
+                 reload_config: Callable[[], Any] | None = None) -> None:
+        self.config = config
+        self.socket_path = Path(socket_path or config.service.socket_path)
+        self.serving = threading.Event()
+        self._reload_config = reload_config
+        self._notifier = notifier or Notifier({})
+        self._machine = StateMachine(self._on_transition)
+        self._cell = CellConnection(config, opener)
+        self._hub = EventHub()
+        self._models = ModelSlot()
+        self._stop = threading.Event()
+        self._wake = threading.Event()
+        self._reload = threading.Event()
+        self._device_lock = threading.Lock()
+        self._started_at = time.time()
+        self._log: IterationLog | None = None
+        self._server: ControlServer | None = None
+        self._fp: FinePositioner | None = None
+        self._job: Job | None = None
+        self._job_thread: threading.Thread | None = None
+        self._next_job_id = 1
+        self._last_job: dict[str, Any] | None = None
+        self._last_iteration: dict[str, Any] | None = None
+        self._last_reload: dict[str, Any] | None = None
+        self._fault: dict[str, Any] | None = None
+        self._backoff = Backoff(config.service.reconnect_initial_s, config.service.reconnect_max_s)
+        self._next_reconnect_s = 0.0
+        self._reconnected = False
+
+    # -- lifecycle -----------------------------------------------------------------------------
+    def stop(self) -> None:
+        """Ask the service to shut down (safe from a signal handler)."""
+        self._stop.set()
+        self._wake.set()
+
+    def request_reload(self) -> None:
+        """Ask for the config and model to be reloaded (safe from a signal handler)."""
+        self._reload.set()
+        self._wake.set()
+
+    def run(self) -> int:
+        """Serve until ``stop``; returns the exit status (0)."""
+        cfg = self.config
+        logger.info("resolved config (%s): %s", cfg.source,
+                    json.dumps(to_mapping(cfg), sort_keys=True))
+        policy = PeerPolicy.from_config(cfg.service.allowed_users, cfg.service.allowed_groups)
+        token = read_token(cfg.service.tcp.token_file) if cfg.service.tcp is not None else None
+        log_path = Path(cfg.controller.paths.log_dir) / ITERATION_LOG_NAME
+        with contextlib.ExitStack() as stack:
+            self._log = stack.enter_context(IterationLog(log_path))
+            self._log.subscribe(self._on_record)
+            logger.info("iteration records go to %s", log_path)
+            stack.callback(self._cell.close)
+            self._server = stack.enter_context(
+                ControlServer(self.socket_path, cfg.service, policy, self, token))
+            stack.callback(self._stop_job)
+            self._fp = FinePositioner(None, cfg, log=self._log)
+            self._open_devices()
+            self.serving.set()
+            state, _, reason = self._machine.snapshot()
+            self._notifier.ready(f"{state.value}: {reason}")
+            self._control_loop()
+            with self._machine.lock:
+                self._machine.transition(State.STOPPING, "stop requested")
+            self._notifier.stopping("stopping")
+        logger.info("stopped")
+        return 0
+
+    def _open_devices(self) -> None:
+        try:
+            self._cell.open()
+        except (FineposError, OSError) as exc:
+            with self._machine.lock:
+                self._enter_fault(f"cannot open the devices: {type(exc).__name__}: {exc}")
+            return
+        with self._machine.lock:
+            self._attach_devices()
+            self._machine.transition(State.IDLE, "devices open")
+
+    def _attach_devices(self) -> None:
+        """Give the positioner the opened devices and load the model found in the state folder."""
+        self._fp = FinePositioner(self._cell.job_devices(), self.config, log=self._log)
+        if self._models.model is None and self._fp.model_path(DEFAULT_SYSTEM).exists():
+            try:
+                self._models.load(self._fp, DEFAULT_SYSTEM)
+            except (FineposError, OSError) as exc:
+                logger.warning("no model in use: %s", exc)
+
+    def _stop_job(self) -> None:
+        """Abort the running job and wait up to service.stop_timeout_s for it to end."""
+        with self._machine.lock:
+            job, thread = self._job, self._job_thread
+        if job is None or thread is None:
+            return
+        self._abort_job(job)
+        thread.join(self.config.service.stop_timeout_s)
+        if thread.is_alive():
+            logger.error("job %d (%s) still running after %.1f s; closing the devices under it",
+                         job.id, job.kind, self.config.service.stop_timeout_s)
+            job.finish("aborted", "the service stopped while the job was still running")
+
+    # -- the control loop ----------------------------------------------------------------------
+    def _control_loop(self) -> None:
+        watchdog = WatchdogPinger(self._notifier)
+        next_poll_s = time.monotonic() + self.config.service.idle_poll_s
+        while not self._stop.is_set():
+            now_s = time.monotonic()
+            cfg = self.config.service
+            if self._reload.is_set():
+                self._reload_if_idle()
+            self._reconnect_if_due(now_s)
+            if cfg.idle_poll_s > 0 and now_s >= next_poll_s:
+                next_poll_s = now_s + cfg.idle_poll_s
+                self._poll_arm()
+            busy_s = self._cell.arm.busy_for_s() if self._cell.arm is not None else 0.0
+            watchdog.tick(now_s, busy_s, cfg.stall_timeout_s)
+            self._wake.wait(min(s for s in (TICK_S, watchdog.interval_s, cfg.idle_poll_s) if s))
+            self._wake.clear()
+
+    def _poll_arm(self) -> None:
+        """While idle, read the pose: a lost link shows up without waiting for a command."""
+        if self._machine.state is not State.IDLE or not self._device_lock.acquire(blocking=False):
+            return
+        try:
+            if self._machine.state is State.IDLE and self._cell.arm is not None:
+                self._cell.arm.pose()
+        except DEVICE_ERRORS as exc:
+            with self._machine.lock:
+                if self._machine.state is State.IDLE:
+                    self._enter_fault(f"arm check while idle: {type(exc).__name__}: {exc}")
+        finally:
+            self._device_lock.release()
+
+    def _reconnect_if_due(self, now_s: float) -> None:
+        with self._machine.lock:
+            if self._machine.state is not State.FAULT or self._reconnected or \
+                    now_s < self._next_reconnect_s:
+                return
+        with self._device_lock:
+            try:
+                self._cell.recover()
+            except (FineposError, OSError) as exc:
+                with self._machine.lock:
+                    delay_s = self._backoff.next_delay_s()
+                    self._next_reconnect_s = time.monotonic() + delay_s
+                message = (f"reconnect attempt {self._backoff.attempts} failed: "
+                           f"{type(exc).__name__}: {exc}; next in {delay_s:.1f} s")
+                logger.warning("%s", message)
+                self._notifier.status(f"fault: {message}")
+                return
+            with self._machine.lock:
+                self._reconnected = True
+                if self._fp is None or self._fp.devices is None:
+                    self._attach_devices()
+        logger.info("devices reconnected; send reset to resume")
+        self._notifier.status("fault: devices reconnected; send reset to resume")
+
+    def _enter_fault(self, reason: str) -> None:
+        """Go to (or stay in) fault for ``reason``; call with the state lock held."""
+        self._fault = {"reason": reason, "since": time.time()}
+        cfg = self.config.service
+        self._backoff = Backoff(cfg.reconnect_initial_s, cfg.reconnect_max_s)
+        self._next_reconnect_s = time.monotonic() + self._backoff.next_delay_s()
+        self._reconnected = False
+        if self._machine.state is State.FAULT:
+            logger.error("still in fault: %s", reason)
+            self._notifier.status(f"fault: {reason}")
+        else:
+            self._machine.transition(State.FAULT, reason)
+
+    # -- config reload (SIGHUP) ----------------------------------------------------------------
+    def _reload_if_idle(self) -> None:
+        with self._machine.lock:
+            if self._job is not None or self._machine.state in (State.STARTING, State.STOPPING):
+                return  # retried once the job has ended
+            self._reload.clear()
+            old = self.config
+            system = (self._models.info() or {}).get("system")
+        try:
+            new = self._reload_config() if self._reload_config is not None else old
+            changed = restart_only_changes(old, new)
+            if changed:
+                raise ConfigError(f"{', '.join(changed)} changed: that needs a restart "
+                                  "(systemctl restart finepos)")
+            policy = PeerPolicy.from_config(new.service.allowed_users, new.service.allowed_groups)
+            fp = FinePositioner(self._cell.job_devices() if self._cell.is_open else None, new,
+                                log=self._log)
+            model = fp.load_model(system=system) if system is not None else None
+        except (FineposError, OSError) as exc:
+            self._reloaded(False, f"refused, the old config and model stay: {exc}")
+            return
+        with self._machine.lock:
+            if self._job is not None:  # a job started meanwhile: apply after it
+                self._reload.set()
+                return
+            self.config = new
+            self._fp = fp
+            if model is not None and system is not None:
+                self._models.set(model, fp.model_path(system))
+            if self._cell.arm is not None:
+                self._cell.arm.inner.limits = new.safety
+            if self._server is not None:
+                self._server.policy = policy
+        self._reloaded(True, f"config {new.source} and model {system or '(none)'} reloaded")
+
+    def _reloaded(self, ok: bool, message: str) -> None:
+        self._last_reload = {"ok": ok, "message": message, "at": time.time()}
+        (logger.info if ok else logger.error)("reload: %s", message)
+        state, _, reason = self._machine.snapshot()
+        self._notifier.status(f"{state.value}: {reason}; reload {message}")
+
+    # -- events --------------------------------------------------------------------------------
+    def _on_transition(self, old: State, new: State, reason: str) -> None:
+        (logger.error if new is State.FAULT else logger.info)(
+            "state %s -> %s: %s", old.value, new.value, reason)
+        self._notifier.status(f"{new.value}: {reason}")
+        self._hub.publish({"event": "state", "state": new.value, "previous": old.value,
+                           "reason": reason, "time": time.time()})
+
+    def _on_record(self, record: dict[str, Any]) -> None:
+        self._last_iteration = record
+        self._hub.publish({"event": "iteration", "record": record})
+
+    # -- requests (called from connection threads) ---------------------------------------------
+    def subscribe(self) -> Subscription:
+        return self._hub.subscribe()
+
+    def handle(self, request: Request) -> dict[str, Any]:
+        if request.cmd in JOB_COMMANDS:
+            return self._start_job(request.cmd, request.args)
+        handlers: dict[str, Callable[[], dict[str, Any]]] = {
+            "status": self.status,
+            "abort": self.abort,
+            "reset": self.reset,
+            "reload": lambda: self.reload_model(request.args["system"]),
+        }
+        if request.cmd not in handlers:
+            raise RequestError("bad_request", f"{request.cmd} is not a command on this connection")
+        return handlers[request.cmd]()
+
+    def status(self) -> dict[str, Any]:
+        with self._machine.lock:
+            state, since, reason = self._machine.snapshot()
+            seen = self._cell.arm.last_pose() if self._cell.arm is not None else None
+            fault = None
+            if self._fault is not None:
+                fault = {**self._fault, "devices": self._cell.not_active(),
+                         "reconnected": self._reconnected,
+                         "reconnect_attempts": self._backoff.attempts}
+            return {
+                "state": state.value, "since": since, "reason": reason, "pid": os.getpid(),
+                "uptime_s": time.time() - self._started_at,
+                "job": self._job.report() if self._job is not None else None,
+                "last_job": self._last_job,
+                "pose": {**seen[0].as_dict(), "at": seen[1]} if seen is not None else None,
+                "last_iteration": self._last_iteration,
+                "model": self._models.info(),
+                "fault": fault,
+                "config": {"source": self.config.source, "last_reload": self._last_reload},
+                "iteration_log": str(self._log.path) if self._log is not None else None,
+                "clients": self._server.client_count if self._server is not None else 0,
+            }
+
+    def _refusal(self, state: State) -> RequestError:
+        if state is State.FAULT:
+            reason = self._fault["reason"] if self._fault else "fault"
+            return RequestError("fault", f"in fault ({reason}); motion is refused until a "
+                                         "reset succeeds")
+        if state in _REFUSAL_CODES:
+            return RequestError(_REFUSAL_CODES[state], f"the service is {state.value}")
+        job = self._job
+        return RequestError("busy", f"busy: job {job.id} ({job.kind}) is running" if job else
+                            f"busy: {state.value}")
+
+    def _check_job_args(self, kind: str, args: dict[str, Any]) -> None:
+        simulated = self._cell.cell is not None
+        if kind == "teach" and args["auto"] and not simulated:
+            raise RequestError("bad_request", "teach auto needs the simulated cell")
+        if kind == "teach" and not args["auto"] and not simulated and \
+                (args["grasp_depth_mm"] is None or args["object_width_mm"] is None):
+            raise RequestError("bad_request", "teach on a real cell needs grasp_depth_mm and "
+                                              "object_width_mm")
+        if kind == "position" and args["offset"] is not None and not simulated:
+            raise RequestError("bad_request", "offset places the simulated arm; on a real cell "
+                                              "the loop starts where the arm is")
+
+    def _start_job(self, kind: str, args: dict[str, Any]) -> dict[str, Any]:
+        with self._machine.lock:
+            state = self._machine.state
+            if state is not State.IDLE:
+                raise self._refusal(state)
+            self._check_job_args(kind, args)
+            job = Job(self._next_job_id, kind, args)
+            self._next_job_id += 1
+            fp = self._fp
+            assert fp is not None and self._cell.arm is not None
+            self._cell.arm.resume()
+            self._job = job
+            self._machine.transition(JOB_STATES[kind], f"job {job.id}: {kind}")
+            self._job_thread = threading.Thread(target=self._run_job, args=(job, fp),
+                                                name=f"job-{job.id}-{kind}", daemon=True)
+            self._job_thread.start()
+        if args["wait"]:
+            job.done.wait()
+        return {"job": job.report()}
+
+    def _run_job(self, job: Job, fp: FinePositioner) -> None:
+        exc: Exception | None = None
+        result = None
+        try:
+            with self._device_lock:
+                result = BODIES[job.kind](JobContext(fp, job.args, self._models))
+        except JobFailed as failed:
+            exc, result = failed, failed.result
+        except Exception as error:  # classified below: every way a job can end is reported
+            exc = error
+        outcome, reason = classify(exc, job.abort.is_set(), self._cell.not_active())
+        if exc is not None and not isinstance(exc, FineposError):
+            logger.error("job %d (%s) raised", job.id, job.kind, exc_info=exc)
+        with self._machine.lock:
+            if not job.finish(outcome, reason, result):
+                return
+            self._last_job = job.report()
+            self._job = None
+            if self._machine.state is not State.STOPPING:
+                if outcome == "fault":
+                    self._enter_fault(f"{job.kind} job {job.id}: {reason}")
+                else:
+                    detail = "" if outcome == "done" else f": {reason}"
+                    self._machine.transition(State.IDLE,
+                                             f"job {job.id} ({job.kind}) {outcome}{detail}")
+        self._wake.set()
+
+    def _abort_job(self, job: Job) -> str | None:
+        """Preempt ``job`` and halt the arm; returns why halting failed, if it did."""
+        job.abort.set()
+        if self._cell.arm is not None:
+            self._cell.arm.preempt()
+        try:
+            if self._fp is not None and self._fp.devices is not None:
+                self._fp.abort()
+            elif self._cell.arm is not None:
+                self._cell.arm.halt()
+        except FineposError as exc:
+            logger.error("halt failed: %s", exc)
+            return f"{type(exc).__name__}: {exc}"
+        return None
+
+    def abort(self) -> dict[str, Any]:
+        """Preempt the running job (if any) and halt the arm."""
+        with self._machine.lock:
+            job = self._job
+        if job is not None:
+            logger.warning("abort requested: job %d (%s)", job.id, job.kind)
+            halt_error = self._abort_job(job)
+        elif self._cell.arm is not None:
+            halt_error = None
+            try:
+                self._cell.arm.halt()
+            except FineposError as exc:
+                halt_error = f"{type(exc).__name__}: {exc}"
+        else:
+            halt_error = "no devices open"
+        return {"aborted": job.report() if job is not None else None,
+                "halted": halt_error is None, "halt_error": halt_error}
+
+    def reset(self) -> dict[str, Any]:
+        """Leave fault: reconnect what is not active, read every device once, go idle."""
+        with self._machine.lock:
+            state = self._machine.state
+            if state is State.IDLE:
+                return {"state": state.value, "reset": "nothing to reset"}
+            if state is not State.FAULT:
+                raise self._refusal(state)
+        with self._device_lock:
+            try:
+                self._cell.recover()
+                self._cell.probe()
+            except (FineposError, OSError) as exc:
+                reason = f"reset failed: {type(exc).__name__}: {exc}"
+                with self._machine.lock:
+                    if self._machine.state is State.FAULT:
+                        self._enter_fault(reason)
+                raise RequestError("fault", f"{reason}; still in fault") from exc
+            with self._machine.lock:
+                if self._machine.state is State.FAULT:
+                    if self._fp is None or self._fp.devices is None:
+                        self._attach_devices()
+                    self._fault = None
+                    self._machine.transition(State.IDLE, "reset")
+                state = self._machine.state
+        return {"state": state.value, "reset": "devices checked"}
+
+    def reload_model(self, system: str | None) -> dict[str, Any]:
+        """Load a model from the state folder into use; a bad one leaves the old in use."""
+        with self._machine.lock:
+            state = self._machine.state
+            if state not in (State.IDLE, State.FAULT):
+                raise self._refusal(state)
+            fp = self._fp
+            system = system or (self._models.info() or {}).get("system") or DEFAULT_SYSTEM
+        assert fp is not None
+        try:
+            self._models.load(fp, system)
+        except (FineposError, OSError) as exc:
+            raise RequestError("failed", f"model not loaded, the old one stays in use: "
+                                         f"{exc}") from exc
+        logger.info("model reloaded: %s", self._models.info())
+        return {"model": self._models.info()}

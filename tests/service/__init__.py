@@ -1,0 +1,1 @@
+"""Tests of the controller service: protocol, security, faults, systemd, the process."""
