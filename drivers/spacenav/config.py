@@ -1,19 +1,19 @@
-"""Configuration of the 3D mouse (config section ``spacenav``): socket and jog mapping.
+"""The 3D mouse's jog mapping (config ``controller.teach.jog``, see controller.teach_spacenav).
 
 Example (YAML)::
 
-    spacenav:
-      socket_path: null          # else $SPNAV_SOCKET, else /var/run/spnav.sock
-      jog:
-        deadband: 15             # counts
-        full_scale: 350          # counts at full deflection
-        max_speed_mm_s: 10.0
-        max_speed_deg_s: 10.0
-        max_period_ms: 200
-        dx_mm: x                 # tool x  <- mouse x (cap pushed right)
-        dy_mm: -z                # tool y  <- mouse -z (cap pulled towards the user)
-        dz_mm: -y                # tool z (approach, towards the object) <- cap pushed down
-        dphi_deg: -ry            # about the approach axis <- twist, see drivers.spacenav.jog
+    controller:
+      teach:
+        jog:
+          deadband: 15             # counts
+          full_scale: 350          # counts at full deflection
+          max_speed_mm_s: 10.0
+          max_speed_deg_s: 10.0
+          max_period_ms: 200
+          dx_mm: x                 # tool x  <- mouse x (cap pushed right)
+          dy_mm: -z                # tool y  <- mouse -z (cap pulled towards the user)
+          dz_mm: -y                # tool z (approach, towards the object) <- cap pushed down
+          dphi_deg: -ry            # about the approach axis <- twist, see drivers.spacenav.jog
 """
 
 from __future__ import annotations
@@ -65,12 +65,3 @@ class JogConfig:
         if spec == "none":
             return None
         return spec.lstrip("-"), (-1.0 if spec.startswith("-") else 1.0)
-
-
-@dataclass(frozen=True)
-class SpacenavConfig:
-    """socket_path: spacenavd's socket (None: ``$SPNAV_SOCKET``, else the default);
-    jog: the deflection-to-motion mapping."""
-
-    socket_path: str | None = None
-    jog: JogConfig = field(default_factory=JogConfig)

@@ -6,7 +6,7 @@ import pytest
 
 from drivers.errors import ConfigError
 from drivers.pose import ToolStep
-from drivers.spacenav import JogConfig, JogIntegrator, MotionEvent, SpacenavConfig, tool_rate
+from drivers.spacenav import JogConfig, JogIntegrator, MotionEvent, tool_rate
 from drivers.spacenav.jog import ToolRate, shaped
 from drivers.typed_config import from_mapping
 
@@ -80,13 +80,12 @@ def test_stop_forgets_the_deflection():
 
 
 def test_config_loads_strictly():
-    cfg = from_mapping(SpacenavConfig, {"socket_path": "/tmp/s.sock",
-                                        "jog": {"deadband": 5, "dphi_deg": "rz"}}, "spacenav")
-    assert cfg.jog.deadband == 5 and cfg.jog.dphi_deg == "rz" and cfg.jog.dx_mm == "x"
-    assert from_mapping(SpacenavConfig, {}, "spacenav").socket_path is None
-    with pytest.raises(ConfigError, match=r"^spacenav\.jog\.dead_band: unknown key"):
-        from_mapping(SpacenavConfig, {"jog": {"dead_band": 5}}, "spacenav")
-    with pytest.raises(ConfigError, match=r"^spacenav\.jog: dx_mm: 'q' is not an axis"):
-        from_mapping(SpacenavConfig, {"jog": {"dx_mm": "q"}}, "spacenav")
+    path = "controller.teach.jog"
+    cfg = from_mapping(JogConfig, {"deadband": 5, "dphi_deg": "rz"}, path)
+    assert cfg.deadband == 5 and cfg.dphi_deg == "rz" and cfg.dx_mm == "x"
+    with pytest.raises(ConfigError, match=r"^controller\.teach\.jog\.dead_band: unknown key"):
+        from_mapping(JogConfig, {"dead_band": 5}, path)
+    with pytest.raises(ConfigError, match=r"^controller\.teach\.jog: dx_mm: 'q' is not an axis"):
+        from_mapping(JogConfig, {"dx_mm": "q"}, path)
     with pytest.raises(ConfigError, match="must exceed deadband"):
-        from_mapping(SpacenavConfig, {"jog": {"deadband": 400}}, "spacenav")
+        from_mapping(JogConfig, {"deadband": 400}, path)
