@@ -17,13 +17,17 @@ $(STAMP): pyproject.toml
 
 setup: $(STAMP)
 
-# The 3D-mouse teach-in test drives the real spacenavd daemon (Debian package). Installed when
-# running as root (CI); otherwise that one test is skipped with its reason.
+# Two tests drive real system programs from Debian: spacenavd (3D-mouse teach-in) and
+# systemd-analyze (the unit file check). Installed when running as root (CI); otherwise those
+# tests are skipped with their reason.
+SYSTEM_PACKAGES := spacenavd:spacenavd systemd-analyze:systemd
 system-deps:
-	@command -v spacenavd >/dev/null 2>&1 || { \
+	@missing=""; for pair in $(SYSTEM_PACKAGES); do \
+	  command -v $${pair%%:*} >/dev/null 2>&1 || missing="$$missing $${pair##*:}"; done; \
+	if [ -n "$$missing" ]; then \
 	  if [ "$$(id -u)" = 0 ] && command -v apt-get >/dev/null 2>&1; then \
-	    (apt-get update -qq || true) && DEBIAN_FRONTEND=noninteractive apt-get install -y -qq spacenavd; \
-	  else echo "note: spacenavd not installed (sudo apt-get install spacenavd); its test will be skipped"; fi; }
+	    (apt-get update -qq || true) && DEBIAN_FRONTEND=noninteractive apt-get install -y -qq $$missing; \
+	  else echo "note: not installed:$$missing (sudo apt-get install$$missing); their tests will be skipped"; fi; fi
 
 demo: $(STAMP)
 	$(BIN)/finepos demo --out out/demo

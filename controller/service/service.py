@@ -409,10 +409,12 @@ class Service:
         return None
 
     def abort(self) -> dict[str, Any]:
-        """Preempt the running job (if any) and halt the arm."""
+        """Preempt the running job (if any) and halt the arm. Training moves nothing and
+        cannot be interrupted: it runs to its end (the answer says so)."""
         with self._machine.lock:
             job = self._job
-        if job is not None:
+        preempt = job is not None and job.kind != "train"
+        if preempt:
             logger.warning("abort requested: job %d (%s)", job.id, job.kind)
             halt_error = self._abort_job(job)
         elif self._cell.arm is not None:
@@ -423,8 +425,12 @@ class Service:
                 halt_error = f"{type(exc).__name__}: {exc}"
         else:
             halt_error = "no devices open"
-        return {"aborted": job.report() if job is not None else None,
-                "halted": halt_error is None, "halt_error": halt_error}
+        answer = {"aborted": job.report() if preempt else None,
+                  "halted": halt_error is None, "halt_error": halt_error}
+        if job is not None and not preempt:
+            answer["note"] = (f"job {job.id} (train) moves nothing and cannot be interrupted; "
+                              "it ends by itself")
+        return answer
 
     def reset(self) -> dict[str, Any]:
         """Leave fault: reconnect what is not active, read every device once, go idle."""

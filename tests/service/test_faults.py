@@ -282,6 +282,8 @@ def test_abort_preempts_a_running_job_and_halts_the_arm(tmp_path, short_dir):
         assert last["outcome"] == "aborted" and last["reason"] == "aborted by request"
         assert len(arm.moves) <= moves_at_abort + 1  # only the move already under way
         assert client.call("teach", wait=True, **TEACH)["job"]["outcome"] == "done"
+        assert client.call("abort") == {"aborted": None, "halted": True, "halt_error": None}
+        assert arm.halts == 2
 
 
 def test_a_hung_arm_command_withholds_the_watchdog(tmp_path, short_dir, notify_socket):
