@@ -23,7 +23,7 @@ from calibration_free.errors import BundleError
 from calibration_free.gabor import GaborConfig
 from calibration_free.localise import Polarity
 from calibration_free.mlp import NumpyMLP
-from calibration_free.model_file import read_model, write_model
+from calibration_free.model_file import check_taught_object, read_model, write_model
 from calibration_free.preprocess import Channel, IntensityStats
 from drivers.errors import FineposError
 from drivers.pose import Pose
@@ -181,7 +181,5 @@ class ModelBundle:
             )
         except (KeyError, TypeError, ValueError, AttributeError, FineposError) as exc:
             raise BundleError(f"{path}: inconsistent model bundle: {exc}") from exc
-        if expect_object is not None and bundle.object_kind != expect_object:
-            raise BundleError(f"{path}: this bundle was taught on object "
-                              f"{bundle.object_kind!r}, not {expect_object!r}")
+        check_taught_object(path, KIND, bundle.object_kind, expect_object)
         return bundle

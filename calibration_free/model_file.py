@@ -11,6 +11,7 @@ from __future__ import annotations
 
 import hashlib
 import json
+import math
 from pathlib import Path
 from typing import Any
 
@@ -115,3 +116,23 @@ def read_model(path: str | Path, kind: str, version: int) \
     if _digest(info_json, arrays) != digest:
         raise BundleError(f"{path}: corrupt {kind} model (checksum mismatch)")
     return info, arrays
+
+
+def nominal_pose_of(info: dict[str, Any]) -> dict[str, float]:
+    """The taught pose stored in a model's JSON, as floats.
+
+    Raises:
+        KeyError, TypeError, ValueError: missing, not numeric, or not finite (callers turn
+            these into a BundleError naming the file).
+    """
+    pose = {k: float(v) for k, v in info["nominal_pose"].items()}
+    if not all(math.isfinite(v) for v in pose.values()):
+        raise ValueError(f"nominal_pose is not finite: {pose}")
+    return pose
+
+
+def check_taught_object(path: str | Path, kind: str, taught: str, expected: str | None) -> None:
+    """Refuse a model of ``kind`` taught on ``taught`` when ``expected`` (if given) differs."""
+    if expected is not None and taught != expected:
+        raise BundleError(f"{path}: this {kind} model was taught on object {taught!r}, "
+                          f"not {expected!r}")

@@ -13,7 +13,6 @@ File: ``model_file`` with kind "hough"; arrays ``psom.weights``, ``psom.nodes{k}
 
 from __future__ import annotations
 
-import math
 from dataclasses import asdict, dataclass, field
 from pathlib import Path
 from typing import Any
@@ -32,7 +31,12 @@ from calibration_free.baselines.hough import HoughLine
 from calibration_free.baselines.psom import PSOM
 from calibration_free.errors import BundleError
 from calibration_free.localise import Localisation, Status
-from calibration_free.model_file import read_model, write_model
+from calibration_free.model_file import (
+    check_taught_object,
+    nominal_pose_of,
+    read_model,
+    write_model,
+)
 from drivers.errors import ConfigError, FineposError
 from drivers.typed_config import from_mapping, to_mapping
 
@@ -252,9 +256,7 @@ class HoughModel:
         """
         info, arrays = read_model(path, KIND, FORMAT_VERSION)
         try:
-            pose = {k: float(v) for k, v in info["nominal_pose"].items()}
-            if not all(math.isfinite(v) for v in pose.values()):
-                raise ValueError(f"nominal_pose is not finite: {pose}")
+            pose = nominal_pose_of(info)
             kappa = info["kappa"]
             model = cls(
                 object_kind=str(info["object_kind"]), kappa=kappa, nominal_pose=pose,
@@ -270,7 +272,5 @@ class HoughModel:
                 training=info.get("training", {}))
         except (KeyError, TypeError, ValueError, AttributeError, FineposError) as exc:
             raise BundleError(f"{path}: inconsistent hough model: {exc}") from exc
-        if expect_object is not None and model.object_kind != expect_object:
-            raise BundleError(f"{path}: this hough model was taught on "
-                              f"{model.object_kind!r}, not {expect_object!r}")
+        check_taught_object(path, "hough", model.object_kind, expect_object)
         return model

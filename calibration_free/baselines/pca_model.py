@@ -12,7 +12,6 @@ File: ``model_file`` with kind "pca"; arrays ``nn1.*`` (``NumpyMLP.to_arrays``),
 
 from __future__ import annotations
 
-import math
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
@@ -26,7 +25,12 @@ from calibration_free.baselines.fuzzy_controller import MAX_RULES, BSplineFuzzyC
 from calibration_free.errors import BundleError
 from calibration_free.localise import Localisation
 from calibration_free.mlp import NumpyMLP
-from calibration_free.model_file import read_model, write_model
+from calibration_free.model_file import (
+    check_taught_object,
+    nominal_pose_of,
+    read_model,
+    write_model,
+)
 from calibration_free.roi import ROI_PX, extract_roi
 from drivers.errors import ConfigError, FineposError
 from drivers.typed_config import from_mapping, to_mapping
@@ -177,9 +181,7 @@ class PcaModel:
         """
         info, arrays = read_model(path, KIND, FORMAT_VERSION)
         try:
-            pose = {k: float(v) for k, v in info["nominal_pose"].items()}
-            if not all(math.isfinite(v) for v in pose.values()):
-                raise ValueError(f"nominal_pose is not finite: {pose}")
+            pose = nominal_pose_of(info)
             model = cls(
                 object_kind=str(info["object_kind"]), kappa=info["kappa"], nominal_pose=pose,
                 front=FrontEnd.from_info(info),
@@ -194,7 +196,5 @@ class PcaModel:
                 training=info.get("training", {}))
         except (KeyError, TypeError, ValueError, AttributeError, FineposError) as exc:
             raise BundleError(f"{path}: inconsistent pca model: {exc}") from exc
-        if expect_object is not None and model.object_kind != expect_object:
-            raise BundleError(f"{path}: this pca model was taught on "
-                              f"{model.object_kind!r}, not {expect_object!r}")
+        check_taught_object(path, "pca", model.object_kind, expect_object)
         return model

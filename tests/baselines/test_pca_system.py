@@ -44,7 +44,7 @@ def test_round_trip_gives_the_same_answers(pca_model, cell, tmp_path):
     assert (a.nn1_mm, a.fc_sc, a.dphi_deg) == (b.nn1_mm, b.fc_sc, b.dphi_deg)
     assert again.config == pca_model.config and again.front == pca_model.front
     assert again.training["images"] == 126
-    with pytest.raises(BundleError, match="taught on 'cube', not 'nut'"):
+    with pytest.raises(BundleError, match="taught on object 'cube', not 'nut'"):
         PcaModel.load(path, expect_object="nut")
 
 
