@@ -18,9 +18,9 @@ from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
-from calibration_free.baselines.hough_model import HoughConfig, HoughModel
+from calibration_free.baselines.hough_model import HoughModel
 from calibration_free.baselines.hough_train import train_hough
-from calibration_free.baselines.pca_model import PcaConfig, PcaModel
+from calibration_free.baselines.pca_model import PcaModel
 from calibration_free.baselines.pca_train import train_pca
 from calibration_free.dataset import Dataset
 from controller.cell_state import CellState
@@ -42,6 +42,29 @@ def _trained(system: str, model: Any, seconds: float, images: int,
 def _images(training: dict[str, Any]) -> int:
     """Distinct images the model was trained on (what acquiring them cost in robot moves)."""
     return int(training.get("images", 0))
+
+
+class _ModelFileSystem:
+    """What the baselines share: their model class saves, loads and checks its own file."""
+
+    name: str
+    suffix: str
+    model_cls: Any
+    estimator_cls: Any
+
+    @staticmethod
+    def save(model: TrainedModel, path: str | Path) -> None:
+        model.model.save(path)
+
+    @classmethod
+    def load(cls, path: str | Path, state: CellState | None = None) -> TrainedModel:
+        model = cls.model_cls.load(path, expect_object=state.object_kind if state else None)
+        return _trained(cls.name, model, float(model.training.get("seconds", 0.0)),
+                        _images(model.training), model.feature_count)
+
+    @classmethod
+    def estimator(cls, model: TrainedModel):
+        return cls.estimator_cls(model.model)
 
 
 class PcaEstimator:
@@ -70,33 +93,20 @@ class PcaEstimator:
                                                     "fuzzy": list(p.fc_sc)})
 
 
-class PcaSystem:
+class PcaSystem(_ModelFileSystem):
     name = "pca"
     suffix = ".pca"
+    model_cls = PcaModel
+    estimator_cls = PcaEstimator
 
     @staticmethod
     def train(nn1: Dataset, nn2: Dataset, state: CellState, perception_cfg) -> TrainedModel:
         model = train_pca(nn1, nn2, object_kind=state.object_kind, kappa=state.kappa,
-                          nominal_pose=state.nominal_pose,
-                          config=getattr(perception_cfg, "pca", PcaConfig()),
+                          nominal_pose=state.nominal_pose, config=perception_cfg.pca,
                           seed=perception_cfg.seed,
                           nn1_extra=nn2 if perception_cfg.nn1_uses_nn2_set else None)
         return _trained("pca", model, model.training["seconds"], _images(model.training),
                         model.feature_count)
-
-    @staticmethod
-    def save(model: TrainedModel, path: str | Path) -> None:
-        model.model.save(path)
-
-    @staticmethod
-    def load(path: str | Path, state: CellState | None = None) -> TrainedModel:
-        model = PcaModel.load(path, expect_object=state.object_kind if state else None)
-        return _trained("pca", model, float(model.training.get("seconds", 0.0)),
-                        _images(model.training), model.feature_count)
-
-    @staticmethod
-    def estimator(model: TrainedModel) -> PcaEstimator:
-        return PcaEstimator(model.model)
 
 
 class HoughEstimator:
@@ -134,28 +144,15 @@ class HoughEstimator:
                       for line in p.constellation.lines]})
 
 
-class HoughSystem:
+class HoughSystem(_ModelFileSystem):
     name = "hough"
     suffix = ".hough"
+    model_cls = HoughModel
+    estimator_cls = HoughEstimator
 
     @staticmethod
     def train(nn1: Dataset, nn2: Dataset, state: CellState, perception_cfg) -> TrainedModel:
         model = train_hough(nn1, nn2, object_kind=state.object_kind, kappa=state.kappa,
-                            nominal_pose=state.nominal_pose,
-                            config=getattr(perception_cfg, "hough", HoughConfig()))
+                            nominal_pose=state.nominal_pose, config=perception_cfg.hough)
         return _trained("hough", model, model.training["seconds"], _images(model.training),
                         model.feature_count)
-
-    @staticmethod
-    def save(model: TrainedModel, path: str | Path) -> None:
-        model.model.save(path)
-
-    @staticmethod
-    def load(path: str | Path, state: CellState | None = None) -> TrainedModel:
-        model = HoughModel.load(path, expect_object=state.object_kind if state else None)
-        return _trained("hough", model, float(model.training.get("seconds", 0.0)),
-                        _images(model.training), model.feature_count)
-
-    @staticmethod
-    def estimator(model: TrainedModel) -> HoughEstimator:
-        return HoughEstimator(model.model)

@@ -13,6 +13,8 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any, Literal
 
+from calibration_free.baselines.hough_model import HoughConfig
+from calibration_free.baselines.pca_model import PcaConfig
 from calibration_free.gabor import GaborConfig
 from calibration_free.pipeline import NN2_HIDDEN, NN2_WEIGHT_DECAY
 from controller.grasp import GraspConfig
@@ -72,7 +74,8 @@ class PerceptionConfig:
     penalty on NN2's weights, so it interpolates between the grid's angles;
     localisation_channel: the image the part is localised in (``max``: normalised max(R,G,B),
     the paper's; ``saturation``: unchanged by light and shadow for a coloured part; ``auto``:
-    whichever separates part and table better in the training images); seed: training seed;
+    whichever separates part and table better in the training images); pca / hough: the
+    baseline systems' settings (``finepos evaluate --system pca|hough``); seed: training seed;
     nn1_uses_nn2_set: also train NN1 on the NN2 grid's images (they cost no extra motion and
     make NN1 precise near the nominal pose, where the loop's fixed point is).
     """
@@ -81,6 +84,8 @@ class PerceptionConfig:
     nn2_hidden: tuple[int, ...] = field(default=NN2_HIDDEN, metadata={"min": 1})
     nn2_weight_decay: float = field(default=NN2_WEIGHT_DECAY, metadata={"min": 0.0})
     localisation_channel: Literal["max", "saturation", "auto"] = "auto"
+    pca: PcaConfig = PcaConfig()
+    hough: HoughConfig = HoughConfig()
     seed: int = 0
     nn1_uses_nn2_set: bool = True
 
