@@ -32,13 +32,18 @@ class GraspConfig:
     step_mm: descent per guarded step; contact_margin_mm: the last part of the descent in
     which contact is expected (guards named "early contact" are ignored there);
     width_tolerance_mm: finger width must be within this of the taught object width;
-    lift_mm: how far to lift after closing; guards: evaluated in order after every step.
+    lift_mm: how far to lift after closing; guards: evaluated in order after every step;
+    min_held_weight_n: after the lift, the part's weight on the wrist sensor (the force along
+    the approach axis against the bias taken with empty jaws) must be at least this; 0 turns
+    the check off. Use it where the gripper reports no finger width (VAL has none); set it
+    well above the sensor's resolution and below the part's weight (cube: 0.15 N).
     """
 
     step_mm: float = field(default=1.0, metadata={"min": 0.05, "max": 10.0})
     contact_margin_mm: float = field(default=2.0, metadata={"min": 0.0})
     width_tolerance_mm: float = field(default=4.0, metadata={"min": 0.0})
     lift_mm: float = field(default=30.0, metadata={"min": 0.0})
+    min_held_weight_n: float = field(default=0.0, metadata={"min": 0.0})
     guards: tuple[Guard, ...] = DEFAULT_GUARDS
 
 
@@ -46,7 +51,8 @@ class GraspConfig:
 class GraspResult:
     """success: the part is held after the lift; reason: what ended the attempt;
     depth_mm: how far the descent got; width_mm: finger width after closing;
-    max_force_n: largest force seen; forces_n: force magnitude after each descent step."""
+    max_force_n: largest force seen; forces_n: force magnitude after each descent step;
+    held_weight_n: the part's weight measured after the lift (None when not lifted)."""
 
     success: bool
     reason: str
@@ -55,11 +61,12 @@ class GraspResult:
     max_force_n: float = 0.0
     forces_n: list[float] = field(default_factory=list)
     retreated: bool = False
+    held_weight_n: float | None = None
 
     def as_dict(self) -> dict:
         return {"success": self.success, "reason": self.reason, "depth_mm": self.depth_mm,
                 "width_mm": self.width_mm, "max_force_n": self.max_force_n,
-                "retreated": self.retreated}
+                "retreated": self.retreated, "held_weight_n": self.held_weight_n}
 
 
 def guarded_grasp(arm: Arm, sensor: WrenchSensor, grasp_depth_mm: float,
@@ -110,6 +117,12 @@ def guarded_grasp(arm: Arm, sensor: WrenchSensor, grasp_depth_mm: float,
         if abs(width - object_width_mm) > config.width_tolerance_mm:
             result.width_mm = width
             return retreat(f"part slipped while lifting: finger width {width:.1f} mm")
+        # The sensor was biased with empty jaws above the part: what it feels along the
+        # approach axis now is the part hanging in the jaws.
+        result.held_weight_n = abs(sensor.read().fz_n)
+        if config.min_held_weight_n and result.held_weight_n < config.min_held_weight_n:
+            return retreat(f"grip check failed: {result.held_weight_n:.3f} N on the wrist "
+                           f"after lifting, expected at least {config.min_held_weight_n:g} N")
     result.success = True
     result.reason = result.reason or "held after lift"
     return result

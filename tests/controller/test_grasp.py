@@ -84,3 +84,31 @@ def test_empty_grip_fails_the_width_check_and_retreats():
     res = guarded_grasp(arm, sensor, 40.0, 30.0, GraspConfig())
     assert not res.success and "grip check failed" in res.reason
     assert arm.pose() == start
+
+
+class Held:
+    """A wrench sensor that feels ``weight_n`` along the approach axis once the arm has lifted
+    above its lowest point (the part hangs in the jaws)."""
+
+    def __init__(self, arm, weight_n):
+        self.arm, self.weight_n, self.lowest = arm, weight_n, arm._pose.z_mm
+
+    def __call__(self):
+        self.lowest = min(self.lowest, self.arm._pose.z_mm)
+        return w(fz=self.weight_n if self.arm._pose.z_mm > self.lowest + 1.0 else 0.0)
+
+
+@pytest.mark.parametrize("weight_n,min_n,success", [
+    (0.15, 0.0, True),     # check off
+    (0.15, 0.08, True),    # the part's weight is felt
+    (0.0, 0.08, False),    # jaws closed on nothing the width check could see (VAL)
+])
+def test_held_weight_check(weight_n, min_n, success):
+    arm, sensor = setup(contact_depth_mm=100.0)
+    sensor._reading = Held(arm, weight_n)
+    start = arm.pose()
+    res = guarded_grasp(arm, sensor, 40.0, 30.0, GraspConfig(min_held_weight_n=min_n))
+    assert res.success is success
+    assert res.held_weight_n == pytest.approx(weight_n)
+    if not success:
+        assert "N on the wrist" in res.reason and arm.pose() == start
