@@ -13,7 +13,7 @@ from __future__ import annotations
 import logging
 import tempfile
 import time
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from pathlib import Path
 
 from controller.comparison.pools import Tick, open_pool
@@ -47,6 +47,7 @@ class Table1Result:
         wall_seconds: the whole run, acquisition and training included.
         workers: parallel jobs the trials ran on.
         budget_loops: the loop budget of every trial.
+        channels: per system, the image it localises the part in ("max" or "saturation").
     """
 
     reports: list[dict]
@@ -56,6 +57,7 @@ class Table1Result:
     wall_seconds: float
     workers: int
     budget_loops: float
+    channels: dict[str, str] = field(default_factory=dict)
 
 
 @dataclass(frozen=True)
@@ -122,4 +124,11 @@ def run_table1(config, *, trials: int, seed: int, workers: int,
     wall = time.perf_counter() - t0
     logger.info("table1: %d systems x %d lightings x %d trials in %.1f s on %d workers",
                 len(systems), len(lightings), trials, wall, used_workers)
-    return Table1Result(reports, states, outcomes, acquisition, wall, used_workers, EVAL_BUDGET)
+    channels = {s: localisation_channel(models[s]) for s in systems}
+    return Table1Result(reports, states, outcomes, acquisition, wall, used_workers, EVAL_BUDGET,
+                        channels)
+
+
+def localisation_channel(model) -> str:
+    """The image a trained system localises the part in (the baselines: max(R,G,B))."""
+    return getattr(model.model, "channel", "max")

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import dataclasses
 import json
 
 import numpy as np
@@ -14,6 +15,7 @@ from controller.comparison.table1_report import (
     rms_at,
     table1_markdown,
     verdict,
+    why,
     write_table1,
 )
 from controller.metrics import summarise
@@ -76,7 +78,7 @@ def test_paired_comparison_says_when_a_difference_is_clear():
 def test_markdown_has_every_section_and_row(result):
     md = table1_markdown(result, "<defaults>")
     for heading in ("## Accuracy", "## Outcomes and failures", "## Cost", "## Verdict",
-                    "## The paper's Table 1"):
+                    "## Why", "## The paper's Table 1"):
         assert heading in md
     assert "| hough | poor | 0 | 0 | 2 | 0 | 0 | 0 | 100% | 100% | 50% |" in md
     assert "| hough | good | 2 | 0 | 0 | 0 | 0 | 1 | 50% | 0% | 50% |" in md
@@ -93,3 +95,12 @@ def test_files_are_written(result, tmp_path):
     assert paths["plot_good"].name == "convergence-good.png"
     for key in ("markdown", "plot_good", "plot_poor"):
         assert paths[key].stat().st_size > 0
+
+
+def test_why_explains_ties_and_names_the_localisation_channels(result):
+    lines = why(result)
+    assert not any("Localisation channels" in line for line in lines)  # none recorded
+    with_channels = dataclasses.replace(result, channels={"gabor": "saturation",
+                                                          "hough": "max"})
+    md = table1_markdown(with_channels, "<defaults>")
+    assert "Localisation channels (gabor: saturation, hough: max)" in md
