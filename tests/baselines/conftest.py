@@ -10,25 +10,9 @@ from calibration_free.baselines.hough_model import HoughModel
 from calibration_free.baselines.hough_train import train_hough
 from calibration_free.baselines.pca_model import PcaModel
 from calibration_free.baselines.pca_train import train_pca
-from calibration_free.dataset import Dataset, grid_offsets, random_offsets
-from calibration_free.synthetic import SyntheticCell, render_dataset
-
-KAPPA = 4
-NOMINAL_POSE = {"x_mm": 10.0, "y_mm": 400.0, "z_mm": 120.0, "o_deg": -90.0, "a_deg": 90.0,
-                "t_deg": 5.0}
-
-
-@pytest.fixture(scope="session")
-def cell() -> SyntheticCell:
-    return SyntheticCell()
-
-
-@pytest.fixture(scope="session")
-def grids(cell) -> tuple[Dataset, Dataset]:
-    """The paper's training sets: 3x3x7 grids with a = 25 mm (NN1) and 5 mm (NN2)."""
-    rng = np.random.default_rng(1)
-    return (render_dataset(cell, grid_offsets(25.0, 180.0 / KAPPA), rng),
-            render_dataset(cell, grid_offsets(5.0, 180.0 / KAPPA), rng))
+from calibration_free.dataset import Dataset, random_offsets
+from calibration_free.synthetic import render_dataset
+from tests.synthetic_scene import KAPPA, NOMINAL_POSE  # noqa: F401  (re-exported)
 
 
 @pytest.fixture(scope="session")
