@@ -1,6 +1,6 @@
 """Serve the simulated wrist force-torque sensor as an ATI F/T controller on a pty (or TCP).
 
-Example: finepos sim ati-emulator --config finepos.yaml
+Example: finepos sim ati-emulator --config deploy/finepos.yaml
 
   prints the port (e.g. /dev/pts/5) to use as ``wrench: {type: ati, port: /dev/pts/5}``. The
   cell is built from the ``scene:`` section of --config (defaults without it). In this process

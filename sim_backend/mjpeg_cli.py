@@ -1,6 +1,6 @@
 """Serve the simulated hand camera (or any OpenCV source) as an MJPEG stream over HTTP.
 
-Example: finepos sim camera-stream --config finepos.yaml --port 8080
+Example: finepos sim camera-stream --config deploy/finepos.yaml --port 8080
 
   prints http://127.0.0.1:8080/stream.mjpg (and /snapshot.jpg), to use as
   ``camera: {type: opencv, source: http://127.0.0.1:8080/stream.mjpg}``. The cell is built from

@@ -2,8 +2,8 @@
 
 A group (``finepos sim ...``, ``finepos bench ...``) maps each leaf name to a module that
 defines ``add_arguments(parser)``, ``run(args) -> int`` and a module docstring whose first
-line is the help text. Modules are imported when the parser is built; none has import-time
-side effects.
+line is the help text and which has an ``Example: finepos ...`` line (shown first in
+--help). Modules are imported when the parser is built; none has import-time side effects.
 """
 
 from __future__ import annotations
@@ -19,7 +19,17 @@ def register_group(subparsers, name: str, help_text: str, leaves: dict[str, str]
         module = importlib.import_module(module_name)
         doc = (module.__doc__ or "").strip()
         first = doc.splitlines()[0] if doc else leaf
-        parser = sub.add_parser(leaf, help=first, description=doc,
+        parser = sub.add_parser(leaf, help=first, description=example_first(doc),
                                 formatter_class=argparse.RawDescriptionHelpFormatter)
         module.add_arguments(parser)
         parser.set_defaults(func=module.run)
+
+
+def example_first(doc: str) -> str:
+    """The docstring with its ``Example:`` line moved to the top (help starts with it)."""
+    lines = doc.splitlines()
+    for i, line in enumerate(lines):
+        if line.strip().startswith("Example"):
+            rest = lines[:i] + lines[i + 1:]
+            return line.strip() + "\n\n" + "\n".join(rest).strip()
+    return doc
