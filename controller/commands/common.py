@@ -15,6 +15,29 @@ from drivers.errors import ConfigError
 from drivers.files import atomic_write_text
 
 
+def positive_int(text: str) -> int:
+    """argparse type: a whole number >= 1 (counts of trials, repeats, workers)."""
+    try:
+        value = int(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"expected a whole number >= 1, got {text!r}") \
+            from None
+    if value < 1:
+        raise argparse.ArgumentTypeError(f"must be >= 1, got {value}")
+    return value
+
+
+def loop_budget(text: str) -> float:
+    """argparse type: a loop budget, a finite number >= 0.5 (one half loop)."""
+    try:
+        value = float(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"expected a number of loops, got {text!r}") from None
+    if not (value >= 0.5 and value < 1e6):
+        raise argparse.ArgumentTypeError(f"must be a finite number >= 0.5, got {text}")
+    return value
+
+
 def add_config_option(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--config", metavar="FILE",
                         help="finepos YAML config (default: the simulated cell, all defaults)")

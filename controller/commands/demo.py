@@ -9,7 +9,7 @@ import tempfile
 import time
 from pathlib import Path
 
-from controller.commands.common import add_config_option, config_from_args
+from controller.commands.common import add_config_option, config_from_args, positive_int
 from controller.evaluation import run_trials, train_on_default_scene, with_lighting
 from controller.iteration_log import IterationLog
 from controller.metrics import summarise
@@ -86,6 +86,6 @@ def register(subparsers) -> None:
         formatter_class=argparse.RawDescriptionHelpFormatter)
     add_config_option(p)
     p.add_argument("--out", default="out/demo", help="output folder")
-    p.add_argument("--trials", type=int, default=50, help="placements per lighting")
+    p.add_argument("--trials", type=positive_int, default=50, help="placements per lighting")
     p.add_argument("--seed", type=int, default=1)
     p.set_defaults(func=cmd_demo)

@@ -6,7 +6,7 @@ import argparse
 import json
 from pathlib import Path
 
-from controller.commands.common import add_config_option, config_from_args, write_json
+from controller.commands.common import add_config_option, config_from_args, positive_int, write_json
 from controller.evaluation import evaluate
 from controller.iteration_log import IterationLog
 from controller.systems import SYSTEMS
@@ -47,7 +47,7 @@ def register(subparsers) -> None:
     p.add_argument("--system", default="gabor", choices=sorted(SYSTEMS))
     p.add_argument("--lighting", choices=["good", "poor", "dim", "side"],
                    help="override the scene's lighting preset")
-    p.add_argument("--trials", type=int, default=100)
+    p.add_argument("--trials", type=positive_int, default=100)
     p.add_argument("--seed", type=int, default=1)
     p.add_argument("--model", metavar="FILE", help="use this trained model (skip training)")
     p.add_argument("--json", metavar="OUT", help="also write the report here")

@@ -7,7 +7,7 @@ import argparse
 import os
 import sys
 
-from controller.commands.common import config_from_args
+from controller.commands.common import config_from_args, positive_int
 from controller.comparison.filter_report import search_markdown, write_search
 from controller.comparison.filter_search import run_filter_search
 from controller.comparison.filter_sets import FILTER_SETS, PAPER_SET, select_sets
@@ -44,13 +44,13 @@ def register(subparsers) -> None:
     p.add_argument("--config", metavar="FILE",
                    help="finepos YAML config (default: the simulated cell, all defaults)")
     p.add_argument("--out", required=True, metavar="DIR", help="output folder")
-    p.add_argument("--repeats", type=int, default=10, help="repeats per filter set")
-    p.add_argument("--trials", type=int, default=20,
+    p.add_argument("--repeats", type=positive_int, default=10, help="repeats per filter set")
+    p.add_argument("--trials", type=positive_int, default=20,
                    help="closed-loop placements per filter set and repeat")
     p.add_argument("--seed", type=int, default=1)
     p.add_argument("--sets", metavar="NAMES",
                    help="comma-separated filter-set names (default: all, listed above)")
-    p.add_argument("--workers", type=int, default=os.cpu_count() or 1,
+    p.add_argument("--workers", type=positive_int, default=os.cpu_count() or 1,
                    help="parallel local processes (default: one per core; 1 runs in this "
                         "process)")
     p.add_argument("--ray", metavar="ADDRESS",

@@ -6,7 +6,7 @@ import argparse
 import os
 import sys
 
-from controller.commands.common import config_from_args
+from controller.commands.common import config_from_args, positive_int
 from controller.comparison.table1 import LIGHTINGS, TABLE1_SYSTEMS, run_table1
 from controller.comparison.table1_report import table1_markdown, write_table1
 
@@ -36,9 +36,10 @@ def register(subparsers) -> None:
     p.add_argument("--config", metavar="FILE",
                    help="finepos YAML config (default: the simulated cell, all defaults)")
     p.add_argument("--out", required=True, metavar="DIR", help="output folder")
-    p.add_argument("--trials", type=int, default=100, help="placements per system and lighting")
+    p.add_argument("--trials", type=positive_int, default=100,
+                   help="placements per system and lighting")
     p.add_argument("--seed", type=int, default=1)
-    p.add_argument("--workers", type=int, default=os.cpu_count() or 1,
+    p.add_argument("--workers", type=positive_int, default=os.cpu_count() or 1,
                    help="parallel processes (default: one per core; 1 runs in this process)")
     p.add_argument("--no-grasp", action="store_true", help="skip the grasp after positioning")
     p.add_argument("--quiet", action="store_true", help="no progress bars")

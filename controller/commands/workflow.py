@@ -9,6 +9,7 @@ from controller.commands.common import (
     add_log_option,
     config_from_args,
     iteration_log,
+    loop_budget,
     parse_triple,
     write_json,
 )
@@ -177,7 +178,7 @@ def register(subparsers) -> None:
     p.add_argument("--model", metavar="FILE", help="model file (default: the state folder's)")
     p.add_argument("--offset", metavar="DX,DY,DPHI",
                    help="first move to the taught pose displaced by this (mm, mm, deg)")
-    p.add_argument("--max-loops", type=float, help="loop budget (default from config)")
+    p.add_argument("--max-loops", type=loop_budget, help="loop budget (default from config)")
     p.add_argument("--grasp", action="store_true", help="grasp after converging")
     p.set_defaults(func=cmd_position)
 

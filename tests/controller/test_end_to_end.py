@@ -89,3 +89,17 @@ def test_cli_reports_bad_input_clearly(tmp_path, capsys):
     assert main(["position", "--state-dir", str(tmp_path), "--offset", "1,2"]) == 2
     err = capsys.readouterr().err
     assert "error:" in err and ("cell state" in err or "--offset" in err)
+
+
+@pytest.mark.parametrize("argv,message", [
+    (["evaluate", "--trials", "0"], "--trials: must be >= 1"),
+    (["demo", "--trials", "-2"], "--trials: must be >= 1"),
+    (["table1", "--trials", "x", "--out", "o"], "--trials: expected a whole number"),
+    (["filter-search", "--repeats", "0", "--out", "o"], "--repeats: must be >= 1"),
+    (["position", "--max-loops", "-1"], "--max-loops: must be a finite number >= 0.5"),
+    (["position", "--max-loops", "nan"], "--max-loops: must be a finite number >= 0.5"),
+])
+def test_counts_and_budgets_are_checked_before_anything_runs(argv, message, capsys):
+    with pytest.raises(SystemExit) as info:
+        main(argv)
+    assert info.value.code == 2 and message in capsys.readouterr().err
