@@ -1,10 +1,10 @@
 """Model bundle: everything needed to run perception for one taught object, in one file.
 
 Format: a finepos model file (``calibration_free.model_file``: safetensors, so loading cannot
-execute code; a JSON header; a sha256 over both) of kind ``gabor``. Arrays: the two networks
-(``nn1.*``, ``nn2.*``, see ``NumpyMLP.to_arrays``). JSON: object kind, kappa, nominal pose,
-frame size, intensity statistics, localisation parameters, Gabor configuration, training
-metadata.
+execute code; a JSON header; a sha256 over both) of kind ``gabor``. Arrays: the networks
+(``nn1.*``, ``nn1_rot.*``, ``nn2.*``, see ``NumpyMLP.to_arrays``). JSON: object kind, kappa,
+nominal pose, frame size, intensity statistics, localisation parameters, Gabor
+configuration, training metadata.
 
 Saving is atomic. Loading returns a new bundle or raises BundleError; it never modifies
 anything, so a failed load leaves the caller's current bundle in place.
@@ -30,7 +30,7 @@ from drivers.pose import Pose
 from drivers.typed_config import from_mapping, to_mapping
 
 KIND = "gabor"
-FORMAT_VERSION = 3  # 2: max_elongation; 3: channel, nominal_uv_px (all under localisation)
+FORMAT_VERSION = 4  # 2: max_elongation; 3: channel, nominal_uv_px; 4: nn1_rot
 POSE_KEYS = ("x_mm", "y_mm", "z_mm", "o_deg", "a_deg", "t_deg")
 
 
@@ -54,7 +54,9 @@ class ModelBundle:
         nominal_uv_px: where the part appeared at the taught pose (u, v); of several blobs
             that match the part, one clearly nearest this point is taken.
         gabor: the filter-bank configuration NN2's inputs come from.
-        nn1: (u_px, v_px) -> (dx_mm, dy_mm).
+        nn1: (u_px, v_px) -> (dx_mm, dy_mm) (half loops).
+        nn1_rot: (u_px, v_px, sin(kappa dphi), cos(kappa dphi)) -> (dx_mm, dy_mm) (full
+            loops, which know the rotation from NN2).
         nn2: Gabor features -> (sin(kappa dphi), cos(kappa dphi)).
         training: JSON-able training metadata (loss curves, seconds, sample counts, seed).
         format_version: file format version this bundle follows.
@@ -75,6 +77,7 @@ class ModelBundle:
     nominal_uv_px: tuple[float, float]
     gabor: GaborConfig
     nn1: NumpyMLP
+    nn1_rot: NumpyMLP
     nn2: NumpyMLP
     training: dict[str, Any] = field(default_factory=dict)
     format_version: int = FORMAT_VERSION
@@ -107,6 +110,9 @@ class ModelBundle:
         if self.nn1.layer_sizes[0] != 2 or self.nn1.n_outputs != 2:
             raise BundleError(f"nn1: must map 2 inputs to 2 outputs, has layers "
                               f"{self.nn1.layer_sizes}")
+        if self.nn1_rot.layer_sizes[0] != 4 or self.nn1_rot.n_outputs != 2:
+            raise BundleError(f"nn1_rot: must map 4 inputs to 2 outputs, has layers "
+                              f"{self.nn1_rot.layer_sizes}")
         if self.nn2.n_inputs != self.gabor.n_filters or self.nn2.n_outputs != 2:
             raise BundleError(f"nn2: must map {self.gabor.n_filters} features to 2 outputs, "
                               f"has layers {self.nn2.layer_sizes}")
@@ -143,7 +149,8 @@ class ModelBundle:
 
     def arrays(self) -> dict[str, np.ndarray]:
         """The networks' weights as named arrays (what the file stores besides the JSON)."""
-        return {**self.nn1.to_arrays("nn1"), **self.nn2.to_arrays("nn2")}
+        return {**self.nn1.to_arrays("nn1"), **self.nn1_rot.to_arrays("nn1_rot"),
+                **self.nn2.to_arrays("nn2")}
 
     @classmethod
     def load(cls, path: str | Path, expect_object: str | None = None) -> ModelBundle:
@@ -175,6 +182,7 @@ class ModelBundle:
                 nominal_uv_px=tuple(float(v) for v in info["localisation"]["nominal_uv_px"]),
                 gabor=from_mapping(GaborConfig, info["gabor"], "gabor"),
                 nn1=NumpyMLP.from_arrays(tensors, "nn1"),
+                nn1_rot=NumpyMLP.from_arrays(tensors, "nn1_rot"),
                 nn2=NumpyMLP.from_arrays(tensors, "nn2"),
                 training=info.get("training", {}),
                 format_version=info["format_version"],

@@ -77,6 +77,8 @@ class Percept:
         dphi_deg: the corrective rotation decoded from nn2_sc; None like ``features``.
         timings_us: microseconds per stage (preprocess, localise, roi, features, nn1, nn2,
             total); stages not run are absent.
+        full_mm: the full loop's translation, from (u, v) and NN2's rotation (the bundle's
+            ``nn1_rot``); None like ``features``.
     """
 
     localisation: Localisation
@@ -85,6 +87,7 @@ class Percept:
     nn2_sc: tuple[float, float] | None
     dphi_deg: float | None
     timings_us: dict[str, float]
+    full_mm: tuple[float, float] | None = None
 
     @property
     def ok(self) -> bool:
@@ -99,11 +102,13 @@ class Percept:
         return self.localisation.v_px
 
     def tool_step(self) -> ToolStep | None:
-        """The corrective step (dphi 0 on the translation-only path); None if not ok."""
+        """The corrective step: NN1's translation on the translation-only path, the full
+        loop's translation and rotation on the whole path; None if not ok."""
         if self.nn1_mm is None:
             return None
-        return ToolStep(dx_mm=self.nn1_mm[0], dy_mm=self.nn1_mm[1],
-                        dphi_deg=0.0 if self.dphi_deg is None else self.dphi_deg)
+        if self.full_mm is None:
+            return ToolStep(dx_mm=self.nn1_mm[0], dy_mm=self.nn1_mm[1])
+        return ToolStep(dx_mm=self.full_mm[0], dy_mm=self.full_mm[1], dphi_deg=self.dphi_deg)
 
 
 class Perception:
@@ -183,11 +188,14 @@ class Perception:
         t5 = clock()
         s, c = self.bundle.nn2(features)
         dphi = angles.decode(float(s), float(c), self.bundle.kappa)
+        norm = max(float(np.hypot(s, c)), 1e-9)
+        dx_rot, dy_rot = self.bundle.nn1_rot(
+            np.array((loc.u_px, loc.v_px, float(s) / norm, float(c) / norm)))
         t6 = clock()
         timings.update(roi=(t4 - t3) / 1e3, features=(t5 - t4) / 1e3, nn2=(t6 - t5) / 1e3,
                        total=(t6 - t0) / 1e3)
         return Percept(loc, (float(dx), float(dy)), features, (float(s), float(c)), dphi,
-                       timings)
+                       timings, (float(dx_rot), float(dy_rot)))
 
 
 def _check_sets(sets: dict[str, Dataset]) -> tuple[int, int]:
@@ -389,21 +397,20 @@ def train_bundle(nn1_data: Dataset, nn2_data: Dataset, *, object_kind: str, kapp
     nn1_names = [n for n in ("nn1", "nn1_extra") if n in sets]
     uv = np.concatenate([centres(n) for n in nn1_names])
     dxdy = np.concatenate([sets[n].labels[prep.usable[n], :2] for n in nn1_names])
-    nn1 = train_mlp(uv, dxdy, NN1_HIDDEN, seed=seed, epochs=nn1_epochs)
-    # The taught pose is where the correction is zero by definition, and the loop settles
-    # where NN1 reads zero: pin NN1's output to zero at the images taken there (a 2-3-2 net
-    # fitted over +/-25 mm otherwise misses that point by a few tenths of a millimetre).
     labels = np.concatenate([sets[n].labels[prep.usable[n]] for n in nn1_names])
     at_nominal = (np.hypot(labels[:, 0], labels[:, 1]) < NOMINAL_TOL_MM) \
         & (np.abs(labels[:, 2]) < NOMINAL_TOL_DEG)
-    nn1_zero_offset = [0.0, 0.0]
-    nominal_uv = tuple(float(v) for v in np.median(uv, axis=0))
-    if at_nominal.any():
-        nominal_uv = tuple(float(v) for v in uv[at_nominal].mean(axis=0))
-        nn1_zero_offset = nn1.model(uv[at_nominal]).mean(axis=0).tolist()
-        nn1 = dataclasses.replace(nn1, model=nn1.model.shifted(nn1_zero_offset))
-    else:
+    if not at_nominal.any():
         logger.warning("no training image at the taught pose: NN1's zero is not pinned")
+    nominal_uv = tuple(float(v) for v in (uv[at_nominal] if at_nominal.any() else uv)
+                       .mean(axis=0))
+    nn1, nn1_zero_offset = _train_pinned(uv, dxdy, at_nominal, seed, nn1_epochs)
+    # The full loop knows the rotation (NN2) before it moves: the silhouette's centre shifts a
+    # little with the part's rotation in the image, which (u, v) alone cannot tell apart from
+    # a translation, so the full loop's translation also sees sin/cos(kappa dphi).
+    s_rot, c_rot = angles.encode(labels[:, 2], kappa)
+    uvsc = np.column_stack([uv, s_rot, c_rot])
+    nn1_rot, nn1_rot_zero_offset = _train_pinned(uvsc, dxdy, at_nominal, seed + 2, nn1_epochs)
 
     bank = GaborBank(gabor)
     features = np.stack([bank.features(extract_roi(prep.normalised["nn2"][i], u, v,
@@ -419,6 +426,7 @@ def train_bundle(nn1_data: Dataset, nn2_data: Dataset, *, object_kind: str, kapp
         "skipped": {name: len(sets[name]) - int(prep.usable[name].size) for name in sets},
         "preprocess_seconds": prep_seconds,
         "nn1": {**_summary(nn1), "zero_offset_mm": nn1_zero_offset},
+        "nn1_rot": {**_summary(nn1_rot), "zero_offset_mm": nn1_rot_zero_offset},
         "nn2": _summary(nn2),
         "seconds": time.perf_counter() - start,
         "created_utc": time.strftime("%Y-%m-%dT%H:%M:%SZ", time.gmtime()),
@@ -431,4 +439,18 @@ def train_bundle(nn1_data: Dataset, nn2_data: Dataset, *, object_kind: str, kapp
                        expected_area_px=prep.expected_area_px, area_tolerance=prep.area_tolerance,
                        max_elongation=prep.max_elongation, channel=prep.channel,
                        nominal_uv_px=nominal_uv,
-                       gabor=gabor, nn1=nn1.model, nn2=nn2.model, training=training)
+                       gabor=gabor, nn1=nn1.model, nn1_rot=nn1_rot.model, nn2=nn2.model,
+                       training=training)
+
+
+def _train_pinned(x: np.ndarray, y: np.ndarray, at_nominal: np.ndarray, seed: int,
+                  epochs: int) -> tuple[TrainedMLP, list[float]]:
+    """A translation network (NN1_HIDDEN, Rprop) whose output is pinned to zero at the
+    samples taken at the taught pose: that is where the correction is zero by definition,
+    and where the loop settles (a 3-hidden-unit fit over +/-25 mm otherwise misses it by a
+    few tenths of a millimetre). Returns the network and the offset subtracted."""
+    trained = train_mlp(x, y, NN1_HIDDEN, seed=seed, epochs=epochs)
+    if not at_nominal.any():
+        return trained, [0.0, 0.0]
+    offset = trained.model(x[at_nominal]).mean(axis=0).tolist()
+    return dataclasses.replace(trained, model=trained.model.shifted(offset)), offset

@@ -34,10 +34,16 @@ class TranslationEstimate:
 
 @dataclass(frozen=True)
 class RotationEstimate:
-    """The corrective rotation about the approach axis (deg), with log values."""
+    """The corrective rotation about the approach axis (deg), with log values.
+
+    dx_mm, dy_mm: a translation refined with the rotation estimate, where the system has one
+    (the full loop then moves by it instead of the translation estimate); None otherwise.
+    """
 
     dphi_deg: float
     record: dict[str, Any] = field(default_factory=dict)
+    dx_mm: float | None = None
+    dy_mm: float | None = None
 
 
 class Estimator(Protocol):

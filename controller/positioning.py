@@ -1,7 +1,8 @@
 """The fine-positioning loop of the paper (Fig. 4): half loops while far, then full loops.
 
 grab -> estimate translation -> if |(dx, dy)| > r_fine: move (dx, dy) and look again (a half
-loop, counts 0.5) -> else estimate rotation and move (dx, dy, dphi) (a full loop, counts 1) ->
+loop, counts 0.5) -> else estimate rotation (with a translation refined by it, where the
+system has one) and move (dx, dy, dphi) (a full loop, counts 1) ->
 repeat until a full look finds a step below the convergence thresholds (no move, the pose is
 reached) or the loop budget is spent. "No object" / "ambiguous" stop without moving. Every
 step passes the arm's safety layer; a rejected step stops the loop.
@@ -138,7 +139,11 @@ class PositioningLoop:
                 kind, cost = "full", 1.0
                 rot = estimator.estimate_rotation(frame.image, tr)
                 record.update(rot.record)
-                step = ToolStep(tr.dx_mm, tr.dy_mm, 0.0, rot.dphi_deg)
+                if rot.dx_mm is not None and rot.dy_mm is not None:
+                    shift = math.hypot(rot.dx_mm, rot.dy_mm)
+                    step = ToolStep(rot.dx_mm, rot.dy_mm, 0.0, rot.dphi_deg)
+                else:
+                    step = ToolStep(tr.dx_mm, tr.dy_mm, 0.0, rot.dphi_deg)
             t2 = time.perf_counter()
             if kind == "full" and shift <= cfg.converge_mm and \
                     abs(step.dphi_deg) <= cfg.converge_deg:

@@ -56,8 +56,8 @@ class GaborEstimator:
         if not p.ok or p.dphi_deg is None:  # same frame as the translation: cannot differ
             raise RuntimeError(f"rotation path lost the object: {p.localisation.reason}")
         return RotationEstimate(p.dphi_deg, record={
-            "features": p.features.tolist(), "nn2": list(p.nn2_sc),
-            "perception_us": p.timings_us})
+            "features": p.features.tolist(), "nn2": list(p.nn2_sc), "nn1_rot": list(p.full_mm),
+            "perception_us": p.timings_us}, dx_mm=p.full_mm[0], dy_mm=p.full_mm[1])
 
 
 class GaborSystem:

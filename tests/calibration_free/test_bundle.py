@@ -24,19 +24,20 @@ def test_round_trip_keeps_everything(bundle, cell, tmp_path):
     again = ModelBundle.load(path, expect_object="cube")
     assert [p.name for p in tmp_path.iterdir()] == ["cube.bundle"]
     for f in dataclasses.fields(ModelBundle):
-        if f.name not in ("nn1", "nn2"):
+        if f.name not in ("nn1", "nn1_rot", "nn2"):
             assert getattr(again, f.name) == getattr(bundle, f.name), f.name
     assert again.kappa == KAPPA and again.nominal_pose == NOMINAL_POSE
     assert again.format_version == FORMAT_VERSION
     assert again.pose.as_dict() == NOMINAL_POSE
-    for name in ("nn1", "nn2"):
+    for name in ("nn1", "nn1_rot", "nn2"):
         a, b = getattr(bundle, name).to_arrays(name), getattr(again, name).to_arrays(name)
         assert a.keys() == b.keys()
         for k in a:
             np.testing.assert_array_equal(a[k], b[k])
     frame = render(cell, np.array([2.0, -3.0, 12.0]), np.random.default_rng(0))
     p, q = Perception(bundle).perceive(frame), Perception(again).perceive(frame)
-    assert (p.nn1_mm, p.nn2_sc, p.dphi_deg) == (q.nn1_mm, q.nn2_sc, q.dphi_deg)
+    assert (p.nn1_mm, p.full_mm, p.nn2_sc, p.dphi_deg) == (q.nn1_mm, q.full_mm, q.nn2_sc,
+                                                            q.dphi_deg)
 
 
 def info_and_tensors(bundle: ModelBundle) -> tuple[dict, dict]:

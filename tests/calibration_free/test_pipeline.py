@@ -10,6 +10,7 @@ from calibration_free.dataset import Dataset, random_offsets
 from calibration_free.errors import ImageError, TrainingError
 from calibration_free.pipeline import Perception, train_bundle
 from calibration_free.synthetic import render, render_at
+from drivers.pose import ToolStep
 
 from .conftest import KAPPA, NOMINAL_POSE
 
@@ -70,9 +71,12 @@ def test_percept_carries_stages_and_a_tool_step(bundle, cell):
                                  "total"}
     assert all(v >= 0 for v in p.timings_us.values())
     assert p.features.shape == (36,) and p.u_px == p.localisation.u_px
-    step = p.tool_step()
-    assert (step.dx_mm, step.dy_mm, step.dz_mm, step.dphi_deg) == (*p.nn1_mm, 0.0, p.dphi_deg)
-    assert perception.translation(frame).nn1_mm == p.nn1_mm
+    step = p.tool_step()  # the full loop's: translation from (u, v) and NN2's rotation
+    assert (step.dx_mm, step.dy_mm, step.dz_mm, step.dphi_deg) == (*p.full_mm, 0.0, p.dphi_deg)
+    assert np.allclose(p.full_mm, (1.5, -2.0), atol=0.5)
+    half = perception.translation(frame)
+    assert half.nn1_mm == p.nn1_mm and half.full_mm is None
+    assert half.tool_step() == ToolStep(*p.nn1_mm)
     normalised, loc = perception.locate(frame)
     assert normalised.dtype == np.float32 and loc == p.localisation
 
@@ -155,8 +159,9 @@ def test_saturation_path_ignores_gain_and_shade(saturation_bundle, cell):
 def test_nn1_reads_zero_at_the_taught_pose(bundle, saturation_bundle, cell):
     for b in (bundle, saturation_bundle):
         p = Perception(b).perceive(render(cell, np.zeros(3), np.random.default_rng(2)))
-        assert np.hypot(*p.nn1_mm) < 0.05
+        assert np.hypot(*p.nn1_mm) < 0.05 and np.hypot(*p.full_mm) < 0.05
         assert b.training["nn1"]["zero_offset_mm"] is not None
+        assert b.training["nn1_rot"]["zero_offset_mm"] is not None
 
 
 def test_clearly_nearest_of_two_matching_blobs_is_taken(bundle, cell):
