@@ -38,9 +38,15 @@ def loop_budget(text: str) -> float:
     return value
 
 
-def add_config_option(parser: argparse.ArgumentParser) -> None:
+def add_config_file_option(parser: argparse.ArgumentParser) -> None:
+    """``--config FILE``: the root config (default: the simulated cell, all defaults)."""
     parser.add_argument("--config", metavar="FILE",
                         help="finepos YAML config (default: the simulated cell, all defaults)")
+
+
+def add_config_option(parser: argparse.ArgumentParser) -> None:
+    """``--config FILE`` and ``--state-dir DIR`` (the workflow commands)."""
+    add_config_file_option(parser)
     parser.add_argument("--state-dir", metavar="DIR",
                         help="override controller.paths.state_dir (teach-in, datasets, models)")
 

@@ -7,7 +7,7 @@ import argparse
 import os
 import sys
 
-from controller.commands.common import config_from_args, positive_int
+from controller.commands.common import add_config_file_option, config_from_args, positive_int
 from controller.comparison.filter_report import search_markdown, write_search
 from controller.comparison.filter_search import run_filter_search
 from controller.comparison.filter_sets import FILTER_SETS, PAPER_SET, select_sets
@@ -41,8 +41,7 @@ def register(subparsers) -> None:
                     "(needs pip install 'finepos[ray]' here and finepos on every node).\n\n"
                     f"Filter sets (the paper's: {PAPER_SET}):\n  " + "\n  ".join(FILTER_SETS),
         formatter_class=argparse.RawDescriptionHelpFormatter)
-    p.add_argument("--config", metavar="FILE",
-                   help="finepos YAML config (default: the simulated cell, all defaults)")
+    add_config_file_option(p)
     p.add_argument("--out", required=True, metavar="DIR", help="output folder")
     p.add_argument("--repeats", type=positive_int, default=10, help="repeats per filter set")
     p.add_argument("--trials", type=positive_int, default=20,

@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import argparse
 
+from controller.commands.common import add_config_file_option
 from controller.config import load_config
 from controller.service.sd_notify import Notifier
 from controller.service.service import Service
@@ -33,8 +34,7 @@ def register(subparsers) -> None:
                     "the model (a bad one is refused, the old one kept). Under systemd "
                     "(Type=notify) it reports READY, STATUS, WATCHDOG and STOPPING.",
         formatter_class=argparse.RawDescriptionHelpFormatter)
-    p.add_argument("--config", metavar="FILE",
-                   help="finepos YAML config (default: the simulated cell, all defaults)")
+    add_config_file_option(p)
     p.add_argument("--socket", metavar="PATH",
                    help="control socket (default: service.socket_path, "
                         "/run/finepos/finepos.sock)")

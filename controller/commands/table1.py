@@ -6,7 +6,7 @@ import argparse
 import os
 import sys
 
-from controller.commands.common import config_from_args, positive_int
+from controller.commands.common import add_config_file_option, config_from_args, positive_int
 from controller.comparison.table1 import LIGHTINGS, TABLE1_SYSTEMS, run_table1
 from controller.comparison.table1_report import table1_markdown, write_table1
 
@@ -33,8 +33,7 @@ def register(subparsers) -> None:
                     "DIR/table1.md, DIR/table1.json (one `finepos evaluate --json` report per "
                     "system and lighting) and DIR/convergence-<lighting>.png.",
         formatter_class=argparse.RawDescriptionHelpFormatter)
-    p.add_argument("--config", metavar="FILE",
-                   help="finepos YAML config (default: the simulated cell, all defaults)")
+    add_config_file_option(p)
     p.add_argument("--out", required=True, metavar="DIR", help="output folder")
     p.add_argument("--trials", type=positive_int, default=100,
                    help="placements per system and lighting")
