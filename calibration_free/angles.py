@@ -12,7 +12,7 @@ import math
 
 import numpy as np
 
-from drivers.errors import ConfigError
+from drivers.core.errors import ConfigError
 
 ArrayOrFloat = np.ndarray | float
 

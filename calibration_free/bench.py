@@ -31,12 +31,12 @@ import torch
 from threadpoolctl import threadpool_limits
 
 from calibration_free import angles
-from calibration_free.baseline import Filter2DFeatures
 from calibration_free.dataset import grid_offsets, random_offsets
+from calibration_free.filter2d_reference import Filter2DFeatures
 from calibration_free.pipeline import Percept, Perception, train_bundle
 from calibration_free.synthetic import SyntheticCell, render, render_dataset
-from drivers.errors import ConfigError, FineposError
-from drivers.files import atomic_write_text
+from drivers.core.errors import ConfigError, FineposError
+from drivers.core.files import atomic_write_text
 
 KAPPA = 4
 NN1_A_MM = 25.0

@@ -25,9 +25,9 @@ from calibration_free.localise import Polarity
 from calibration_free.mlp import NumpyMLP
 from calibration_free.model_file import check_taught_object, read_model, write_model
 from calibration_free.preprocess import Channel, IntensityStats
-from drivers.errors import FineposError
-from drivers.pose import Pose
-from drivers.typed_config import from_mapping, to_mapping
+from drivers.core.errors import FineposError
+from drivers.core.pose import Pose
+from drivers.core.typed_config import from_mapping, to_mapping
 
 KIND = "gabor"
 FORMAT_VERSION = 4  # 2: max_elongation; 3: channel, nominal_uv_px; 4: nn1_rot
@@ -119,7 +119,7 @@ class ModelBundle:
 
     @property
     def pose(self) -> Pose:
-        """The nominal pose as a ``drivers.pose.Pose``."""
+        """The nominal pose as a ``drivers.core.pose.Pose``."""
         return Pose(**self.nominal_pose)
 
     def _info(self) -> dict[str, Any]:

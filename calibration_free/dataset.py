@@ -1,6 +1,6 @@
 """Training and test sets: images (or features), corrective-step labels and metadata, one file.
 
-Labels are ``[dx_mm, dy_mm, dphi_deg]``: the tool step (in the tool frame, ``drivers.pose.
+Labels are ``[dx_mm, dy_mm, dphi_deg]``: the tool step (in the tool frame, ``drivers.core.pose.
 ToolStep`` convention) that brings the arm back to the nominal pose from where the image was
 taken. The arm is displaced by the negative of the label before the image is grabbed (paper:
 "after displacing the robot by -(dx, dy, dphi)").
@@ -24,7 +24,7 @@ from typing import Any
 import numpy as np
 
 from calibration_free.errors import DatasetError
-from drivers.files import atomic_write_bytes
+from drivers.core.files import atomic_write_bytes
 
 FORMAT = "finepos-dataset"
 VERSION = 1

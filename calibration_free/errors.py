@@ -1,6 +1,6 @@
 """Typed errors raised by the calibration-free perception and learning code."""
 
-from drivers.errors import FineposError
+from drivers.core.errors import FineposError
 
 
 class ImageError(FineposError, ValueError):

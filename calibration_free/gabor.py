@@ -30,7 +30,7 @@ from typing import Literal
 import numpy as np
 
 from calibration_free.errors import ImageError
-from drivers.errors import ConfigError
+from drivers.core.errors import ConfigError
 
 Kind = Literal["even", "odd", "magnitude"]
 

@@ -21,7 +21,7 @@ import cv2
 import numpy as np
 
 from calibration_free.errors import ImageError
-from drivers.errors import ConfigError
+from drivers.core.errors import ConfigError
 
 Status = Literal["ok", "no_object", "ambiguous"]
 Polarity = Literal["bright", "dark"]

@@ -20,7 +20,7 @@ import safetensors.numpy
 from safetensors import SafetensorError
 
 from calibration_free.errors import BundleError
-from drivers.files import atomic_write_bytes
+from drivers.core.files import atomic_write_bytes
 
 FORMAT = "finepos-model"
 _INFO_KEY = "finepos_model"

@@ -39,7 +39,7 @@ from calibration_free.preprocess import (
     normalise,
 )
 from calibration_free.roi import extract_roi
-from drivers.pose import Pose, ToolStep
+from drivers.core.pose import Pose, ToolStep
 
 logger = logging.getLogger(__name__)
 

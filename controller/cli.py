@@ -12,7 +12,7 @@ import logging
 import os
 import sys
 
-from drivers.errors import FineposError
+from drivers.core.errors import FineposError
 
 COMMAND_MODULES = (
     "controller.commands.workflow",

@@ -13,18 +13,18 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any, Literal
 
-from calibration_free.baselines.hough_model import HoughConfig
-from calibration_free.baselines.pca_model import PcaConfig
+from calibration_free.baselines.hough.model import HoughConfig
+from calibration_free.baselines.pca.model import PcaConfig
 from calibration_free.gabor import GaborConfig
 from calibration_free.pipeline import NN2_HIDDEN, NN2_WEIGHT_DECAY
-from controller.grasp import GraspConfig
-from controller.positioning import LoopConfig
+from controller.loop.grasp import GraspConfig
+from controller.loop.positioning import LoopConfig
 from controller.service.config import ServiceConfig
-from controller.teach_spacenav import TeachConfig
-from drivers.errors import ConfigError
+from controller.teach.spacenav import TeachConfig
+from drivers.core.errors import ConfigError
+from drivers.core.typed_config import from_mapping, load_yaml_file
 from drivers.safety import SafetyLimits
-from drivers.typed_config import from_mapping, load_yaml_file
-from sim_backend.scene_config import SceneConfig
+from sim_backend.cell.scene_config import SceneConfig
 
 
 @dataclass(frozen=True)

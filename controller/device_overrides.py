@@ -5,7 +5,7 @@ from __future__ import annotations
 import dataclasses
 
 from controller.devices import parse_device_section
-from drivers.typed_config import to_mapping
+from drivers.core.typed_config import to_mapping
 
 
 def with_device(config, kind: str, backend_type: str, **options):

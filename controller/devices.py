@@ -15,11 +15,11 @@ from typing import Any
 
 from drivers.ati.config import AtiConfig
 from drivers.camera.config import OpenCvCameraConfig
-from drivers.errors import ConfigError
+from drivers.core.errors import ConfigError
+from drivers.core.typed_config import from_mapping
 from drivers.interfaces import Arm, Camera, WrenchSensor
-from drivers.typed_config import from_mapping
 from drivers.val.config import ValConfig
-from sim_backend.scene_config import SimArmConfig
+from sim_backend.cell.scene_config import SimArmConfig
 
 
 @dataclass(frozen=True)
@@ -46,7 +46,7 @@ class DeviceContext:
     def cell(self):
         """The simulated work cell (created on first use)."""
         if self._cell is None:
-            from sim_backend.cell import SimCell
+            from sim_backend.cell.sim_cell import SimCell
 
             arm_opts = (self.config.arm.options if self.config.arm.type == "sim"
                         else SimArmConfig())

@@ -14,15 +14,15 @@ from pathlib import Path
 import numpy as np
 
 from calibration_free.dataset import Dataset
-from controller.acquisition import acquire, grid_for, random_set, transfer
-from controller.cell_state import CellState
-from controller.grasp import GraspResult, guarded_grasp
-from controller.iteration_log import IterationLog
-from controller.positioning import PositioningLoop, PositioningResult
-from controller.systems import SYSTEMS, TrainedModel
-from drivers.errors import FineposError
-from drivers.pose import Pose
-from sim_backend.objects import PARTS
+from controller.loop.grasp import GraspResult, guarded_grasp
+from controller.loop.iteration_log import IterationLog
+from controller.loop.positioning import PositioningLoop, PositioningResult
+from controller.systems.registry import SYSTEMS, TrainedModel
+from controller.teach.acquisition import acquire, grid_for, random_set, transfer
+from controller.teach.cell_state import CellState
+from drivers.core.errors import FineposError
+from drivers.core.pose import Pose
+from sim_backend.cell.objects import PARTS
 
 logger = logging.getLogger(__name__)
 

@@ -13,9 +13,9 @@ from collections.abc import Callable
 
 import numpy as np
 
-from drivers.errors import DeviceNotConnectedError, MotionRejectedError
+from drivers.core.errors import DeviceNotConnectedError, MotionRejectedError
+from drivers.core.pose import Pose, ToolStep
 from drivers.interfaces import Arm, Camera, Lifecycle, Wrench, WrenchSensor
-from drivers.pose import Pose, ToolStep
 
 
 def _close(a: Pose, b: Pose, tol_mm: float, tol_deg: float) -> bool:

@@ -18,8 +18,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from drivers.errors import DeviceFaultError, DeviceNotConnectedError, MotionRejectedError
-from drivers.pose import Pose, ToolStep
+from drivers.core.errors import DeviceFaultError, DeviceNotConnectedError, MotionRejectedError
+from drivers.core.pose import Pose, ToolStep
 from drivers.safety import SafetyLimits, check_target, check_tool_step
 
 logger = logging.getLogger(__name__)

@@ -14,8 +14,8 @@ from typing import Literal
 
 import numpy as np
 
-from drivers.errors import MotionRejectedError
-from drivers.pose import Pose, ToolStep
+from drivers.core.errors import MotionRejectedError
+from drivers.core.pose import Pose, ToolStep
 
 logger = logging.getLogger(__name__)
 

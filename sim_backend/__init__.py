@@ -1,11 +1,7 @@
-"""The simulated PUMA 260 work cell (PyBullet, DIRECT mode), its devices and emulators.
+"""The simulated PUMA 260 work cell and the emulators of its devices.
 
-Work cell: ``scene_config`` (the ``scene:`` YAML section and the simulated arm's options),
-``puma260`` (DH kinematics), ``meshes`` and ``objects`` (procedural toy construction-set parts),
-``robot_model`` (arm, gripper and camera housing as a PyBullet multibody), ``hand_camera``,
-``lighting`` and ``shadows`` (light presets, cast shadows), ``textures``, ``contact`` (wrench
-and gripper contact model), ``cell`` (SimCell, the whole cell), ``devices`` (SimArm, SimCamera,
-SimWrenchSensor) and the CLI leaves ``snapshot`` and ``bench``. The serial/network device
-emulators (``val_emulator*``, ``ati_emulator*``, ``magellan*``, ``mjpeg*``) describe themselves.
-Nothing here has import-time side effects.
+``cell/`` (the PyBullet cell: arm, gripper, hand camera, parts, light, contact), ``devices``
+(SimArm, SimCamera, SimWrenchSensor: the device interfaces on a SimCell), ``emulators/`` (the
+VAL, ATI, Magellan and MJPEG emulators on real pseudo-terminals and sockets), and the CLI
+leaves ``snapshot`` and ``bench``. Nothing here has import-time side effects.
 """

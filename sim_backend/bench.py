@@ -23,13 +23,13 @@ from pathlib import Path
 
 import numpy as np
 
-from drivers.errors import ConfigError
-from drivers.files import atomic_write_text
-from drivers.pose import ToolStep
+from drivers.core.errors import ConfigError
+from drivers.core.files import atomic_write_text
+from drivers.core.pose import ToolStep
 from drivers.safety import SafetyLimits
-from sim_backend.cell import SimCell
+from sim_backend.cell.scene_config import SceneConfig, load_scene
+from sim_backend.cell.sim_cell import SimCell
 from sim_backend.devices import SimArm, SimCamera
-from sim_backend.scene_config import SceneConfig, load_scene
 
 logger = logging.getLogger(__name__)
 

@@ -16,12 +16,12 @@ import time
 
 import numpy as np
 
-from drivers.errors import DeviceFaultError
+from drivers.core.errors import DeviceFaultError
+from drivers.core.pose import Pose
 from drivers.interfaces import Arm, Camera, Frame, Wrench, WrenchSensor
-from drivers.pose import Pose
 from drivers.safety import SafetyLimits
-from sim_backend import hand_camera
-from sim_backend.cell import SimCell
+from sim_backend.cell import hand_camera
+from sim_backend.cell.sim_cell import SimCell
 
 
 def _require_open(cell: SimCell, device: str) -> None:

@@ -18,11 +18,11 @@ from pathlib import Path
 
 import cv2
 
-from drivers.errors import ConfigError
-from drivers.files import atomic_write_bytes
-from drivers.pose import ToolStep
-from sim_backend.cell import SimCell
-from sim_backend.scene_config import SceneConfig, load_scene
+from drivers.core.errors import ConfigError
+from drivers.core.files import atomic_write_bytes
+from drivers.core.pose import ToolStep
+from sim_backend.cell.scene_config import SceneConfig, load_scene
+from sim_backend.cell.sim_cell import SimCell
 
 logger = logging.getLogger(__name__)
 

@@ -3,12 +3,12 @@
 from controller.commands.leaves import register_group
 
 LEAVES = {
-    "val": "sim_backend.val_emulator.bench",
+    "val": "sim_backend.emulators.val.bench",
     "sim": "sim_backend.bench",
     "perception": "calibration_free.bench",
     "service": "controller.service.bench",
-    "ati": "sim_backend.ati_emulator_bench",
-    "camera-stream": "sim_backend.mjpeg_bench",
+    "ati": "sim_backend.emulators.ati.bench",
+    "camera-stream": "sim_backend.emulators.mjpeg.bench",
 }
 
 

@@ -10,9 +10,9 @@ import time
 from pathlib import Path
 
 from controller.config import load_config
-from controller.iteration_log import IterationLog
-from drivers.errors import ConfigError
-from drivers.files import atomic_write_text
+from controller.loop.iteration_log import IterationLog
+from drivers.core.errors import ConfigError
+from drivers.core.files import atomic_write_text
 
 
 def positive_int(text: str) -> int:

@@ -17,7 +17,7 @@ from controller.service.client import ServiceClient, ServiceError
 from controller.service.commands import COMMANDS, JOB_COMMANDS, REQUIRED, Arg
 from controller.service.config import ServiceConfig
 from controller.service.listeners import read_token
-from drivers.errors import ConfigError
+from drivers.core.errors import ConfigError
 
 DEFAULT_SOCKET = ServiceConfig.socket_path
 # Subcommand: (runnable example, what it does).

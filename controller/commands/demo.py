@@ -10,11 +10,11 @@ import time
 from pathlib import Path
 
 from controller.commands.common import add_config_option, config_from_args, positive_int
-from controller.evaluation import run_trials, train_on_default_scene, with_lighting
-from controller.iteration_log import IterationLog
-from controller.metrics import summarise
-from controller.plots import plot_convergence
-from drivers.files import atomic_write_text
+from controller.evaluation.metrics import summarise
+from controller.evaluation.plots import plot_convergence
+from controller.evaluation.trials import run_trials, train_on_default_scene, with_lighting
+from controller.loop.iteration_log import IterationLog
+from drivers.core.files import atomic_write_text
 
 LIGHTINGS = ("good", "poor")
 

@@ -7,9 +7,9 @@ import json
 from pathlib import Path
 
 from controller.commands.common import add_config_option, config_from_args, positive_int, write_json
-from controller.evaluation import evaluate
-from controller.iteration_log import IterationLog
-from controller.systems import SYSTEMS
+from controller.evaluation.trials import evaluate
+from controller.loop.iteration_log import IterationLog
+from controller.systems.registry import SYSTEMS
 
 
 def cmd_evaluate(args) -> int:

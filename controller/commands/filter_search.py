@@ -8,9 +8,9 @@ import os
 import sys
 
 from controller.commands.common import add_config_file_option, config_from_args, positive_int
-from controller.comparison.filter_report import search_markdown, write_search
-from controller.comparison.filter_search import run_filter_search
-from controller.comparison.filter_sets import FILTER_SETS, PAPER_SET, select_sets
+from controller.evaluation.comparison.filter_report import search_markdown, write_search
+from controller.evaluation.comparison.filter_search import run_filter_search
+from controller.evaluation.comparison.filter_sets import FILTER_SETS, PAPER_SET, select_sets
 
 
 def cmd_filter_search(args) -> int:

@@ -3,11 +3,11 @@
 from controller.commands.leaves import register_group
 
 LEAVES = {
-    "val-emulator": "sim_backend.val_emulator.command",
+    "val-emulator": "sim_backend.emulators.val.command",
     "snapshot": "sim_backend.snapshot",
-    "magellan-emulator": "sim_backend.magellan_cli",
-    "ati-emulator": "sim_backend.ati_emulator_cli",
-    "camera-stream": "sim_backend.mjpeg_cli",
+    "magellan-emulator": "sim_backend.emulators.magellan.command",
+    "ati-emulator": "sim_backend.emulators.ati.command",
+    "camera-stream": "sim_backend.emulators.mjpeg.command",
 }
 
 

@@ -7,8 +7,8 @@ import os
 import sys
 
 from controller.commands.common import add_config_file_option, config_from_args, positive_int
-from controller.comparison.table1 import LIGHTINGS, TABLE1_SYSTEMS, run_table1
-from controller.comparison.table1_report import table1_markdown, write_table1
+from controller.evaluation.comparison.table1 import LIGHTINGS, TABLE1_SYSTEMS, run_table1
+from controller.evaluation.comparison.table1_report import table1_markdown, write_table1
 
 
 def cmd_table1(args) -> int:

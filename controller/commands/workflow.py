@@ -16,10 +16,10 @@ from controller.commands.common import (
 from controller.commands.device_options import add_device_options, apply_device_options
 from controller.devices import open_devices
 from controller.fine_positioner import DATASETS, FinePositioner
-from controller.systems import SYSTEMS
-from controller.teach_spacenav import DEFAULT_SIM_START_OFFSET, TeachAborted, teach_with_spacenav
-from drivers.errors import ConfigError
-from drivers.pose import ToolStep
+from controller.systems.registry import SYSTEMS
+from controller.teach.spacenav import DEFAULT_SIM_START_OFFSET, TeachAborted, teach_with_spacenav
+from drivers.core.errors import ConfigError
+from drivers.core.pose import ToolStep
 
 _SPACENAV_ONLY = ("start_offset", "spnav_socket", "timeout_s")
 

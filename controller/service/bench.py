@@ -27,7 +27,7 @@ from collections import defaultdict
 from pathlib import Path
 
 from controller.commands.common import write_json
-from controller.iteration_log import read_log
+from controller.loop.iteration_log import read_log
 from controller.service.client import ServiceClient
 
 OFFSETS = ((12.0, -8.0, 20.0), (-15.0, 10.0, -25.0), (8.0, 14.0, 10.0), (-10.0, -12.0, -15.0))

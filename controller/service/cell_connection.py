@@ -14,7 +14,7 @@ from collections.abc import Callable
 
 from controller.devices import CellDevices, open_devices
 from controller.service.job_arm import PreemptibleArm
-from drivers.errors import DeviceNotConnectedError
+from drivers.core.errors import DeviceNotConnectedError
 from drivers.interfaces import Device, Lifecycle
 
 DeviceOpener = Callable[..., contextlib.AbstractContextManager[CellDevices]]

@@ -15,7 +15,7 @@ from collections.abc import Iterator
 from pathlib import Path
 from typing import Any
 
-from drivers.errors import FineposError
+from drivers.core.errors import FineposError
 
 
 class ServiceError(FineposError):

@@ -13,7 +13,7 @@ from dataclasses import dataclass
 from typing import Any
 
 from controller.fine_positioner import DATASETS
-from controller.systems import SYSTEMS
+from controller.systems.registry import SYSTEMS
 
 REQUIRED = object()
 

@@ -1,6 +1,6 @@
 """Config section ``service:``: where the control socket is, who may use it, how faults recover.
 
-Loaded strictly like every other section (``drivers.typed_config``). User and group names are
+Loaded strictly like every other section (``drivers.core.typed_config``). User and group names are
 resolved when the service starts (``controller.service.peer``), not at load, so a config can be
 checked on a machine without those accounts.
 """

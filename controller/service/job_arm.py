@@ -17,9 +17,9 @@ import time
 from collections.abc import Callable
 from typing import TypeVar
 
-from drivers.errors import MotionRejectedError
+from drivers.core.errors import MotionRejectedError
+from drivers.core.pose import Pose, ToolStep
 from drivers.interfaces import Arm, Lifecycle, Motion
-from drivers.pose import Pose, ToolStep
 from drivers.safety import SafetyLimits
 
 T = TypeVar("T")

@@ -22,14 +22,14 @@ from typing import Any
 
 from controller.fine_positioner import FinePositioner
 from controller.service.model_slot import ModelSlot
-from drivers.errors import (
+from drivers.core.errors import (
     DeviceFaultError,
     DeviceNotConnectedError,
     DeviceTimeoutError,
     FineposError,
     ProtocolError,
 )
-from drivers.pose import ToolStep
+from drivers.core.pose import ToolStep
 
 DEVICE_ERRORS = (DeviceFaultError, DeviceTimeoutError, ProtocolError, DeviceNotConnectedError)
 

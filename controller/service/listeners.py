@@ -16,7 +16,7 @@ import stat
 from pathlib import Path
 
 from controller.service.config import TcpConfig
-from drivers.errors import ConfigError, FineposError
+from drivers.core.errors import ConfigError, FineposError
 
 logger = logging.getLogger(__name__)
 

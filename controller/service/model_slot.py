@@ -8,7 +8,7 @@ from pathlib import Path
 from typing import Any
 
 from controller.fine_positioner import FinePositioner
-from controller.systems import TrainedModel
+from controller.systems.registry import TrainedModel
 
 DEFAULT_SYSTEM = "gabor"
 

@@ -16,7 +16,7 @@ import struct
 from collections.abc import Iterable
 from dataclasses import dataclass
 
-from drivers.errors import ConfigError
+from drivers.core.errors import ConfigError
 
 # linux/asm-generic/socket.h; the socket module exports SO_PEERCRED but not this one.
 SO_PEERGROUPS = 59

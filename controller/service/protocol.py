@@ -14,9 +14,9 @@ import socket
 from dataclasses import dataclass
 from typing import Any
 
-from controller.iteration_log import to_json_line
+from controller.loop.iteration_log import to_json_line
 from controller.service.commands import COMMANDS, validate_args
-from drivers.errors import FineposError
+from drivers.core.errors import FineposError
 
 MAX_ID_CHARS = 64
 MAX_ID_INT = 2**53

@@ -29,7 +29,7 @@ from typing import Any
 
 from controller.devices import open_devices
 from controller.fine_positioner import FinePositioner
-from controller.iteration_log import IterationLog
+from controller.loop.iteration_log import IterationLog
 from controller.service.backoff import Backoff
 from controller.service.cell_connection import CellConnection, DeviceOpener
 from controller.service.commands import JOB_COMMANDS
@@ -44,8 +44,8 @@ from controller.service.sd_notify import Notifier
 from controller.service.server import ControlServer
 from controller.service.states import JOB_STATES, State, StateMachine
 from controller.service.watchdog import WatchdogPinger
-from drivers.errors import ConfigError, FineposError
-from drivers.typed_config import to_mapping
+from drivers.core.errors import ConfigError, FineposError
+from drivers.core.typed_config import to_mapping
 
 logger = logging.getLogger(__name__)
 

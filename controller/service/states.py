@@ -13,7 +13,7 @@ import threading
 import time
 from collections.abc import Callable
 
-from drivers.errors import FineposError
+from drivers.core.errors import FineposError
 
 
 class State(enum.Enum):

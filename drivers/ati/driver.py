@@ -28,7 +28,7 @@ from drivers.ati.protocol import (
     check_silent_reply,
     parse_query_reply,
 )
-from drivers.errors import (
+from drivers.core.errors import (
     DeviceFaultError,
     DeviceNotConnectedError,
     DeviceTimeoutError,

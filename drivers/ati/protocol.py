@@ -14,7 +14,7 @@ from __future__ import annotations
 import re
 from dataclasses import dataclass
 
-from drivers.errors import DeviceFaultError, ProtocolError
+from drivers.core.errors import DeviceFaultError, ProtocolError
 
 PROMPT = b">"
 AXES = ("fx", "fy", "fz", "tx", "ty", "tz")

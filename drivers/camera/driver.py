@@ -18,7 +18,7 @@ import time
 
 from drivers.camera.config import OpenCvCameraConfig
 from drivers.camera.frame_reader import FrameReader, FrameStats
-from drivers.errors import DeviceTimeoutError
+from drivers.core.errors import DeviceTimeoutError
 from drivers.interfaces import Camera, Frame
 
 logger = logging.getLogger(__name__)

@@ -23,7 +23,7 @@ import numpy as np
 
 from drivers.camera.config import OpenCvCameraConfig
 from drivers.camera.drop_counter import DropCounter
-from drivers.errors import DeviceNotConnectedError, DeviceTimeoutError
+from drivers.core.errors import DeviceNotConnectedError, DeviceTimeoutError
 from drivers.interfaces import Frame
 
 logger = logging.getLogger(__name__)

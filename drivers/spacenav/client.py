@@ -12,7 +12,7 @@ import selectors
 import socket
 import time
 
-from drivers.errors import DeviceNotConnectedError
+from drivers.core.errors import DeviceNotConnectedError
 from drivers.spacenav.events import EVENT_BYTES, SpnavEvent, decode_event
 
 logger = logging.getLogger(__name__)

@@ -1,4 +1,4 @@
-"""The 3D mouse's jog mapping (config ``controller.teach.jog``, see controller.teach_spacenav).
+"""The 3D mouse's jog mapping (config ``controller.teach.jog``, see controller.teach.spacenav).
 
 Example (YAML)::
 

@@ -11,7 +11,7 @@ from __future__ import annotations
 import struct
 from dataclasses import dataclass
 
-from drivers.errors import ProtocolError
+from drivers.core.errors import ProtocolError
 
 EVENT = struct.Struct("=8i")
 EVENT_BYTES = EVENT.size  # 32

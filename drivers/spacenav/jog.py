@@ -7,7 +7,7 @@ Sign conventions:
   the user, each rotation right-handed about its axis. That is not verified on a device here,
   so every mapping is configuration (``JogConfig``), and the Magellan emulator scripts are
   written in these client-side values.
-- A tool step (``drivers.pose.ToolStep``): dx_mm / dy_mm along the tool's x / y axes, dz_mm
+- A tool step (``drivers.core.pose.ToolStep``): dx_mm / dy_mm along the tool's x / y axes, dz_mm
   along the approach axis (positive = towards the object), dphi_deg right-handed about the
   approach axis.
 - The default mapping assumes the tool points down with its x axis to the user's right:
@@ -32,7 +32,7 @@ from __future__ import annotations
 import math
 from dataclasses import dataclass
 
-from drivers.pose import ToolStep
+from drivers.core.pose import ToolStep
 from drivers.spacenav.config import JogConfig
 from drivers.spacenav.events import MotionEvent
 

@@ -22,9 +22,14 @@ import contextlib
 import logging
 from collections.abc import Iterator
 
-from drivers.errors import DeviceFaultError, DeviceTimeoutError, MotionRejectedError, ProtocolError
+from drivers.core.errors import (
+    DeviceFaultError,
+    DeviceTimeoutError,
+    MotionRejectedError,
+    ProtocolError,
+)
+from drivers.core.pose import Pose
 from drivers.interfaces import Arm
-from drivers.pose import Pose
 from drivers.safety import SafetyLimits
 from drivers.val.config import ValConfig
 from drivers.val.link import ValLink

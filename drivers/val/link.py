@@ -14,7 +14,7 @@ import time
 
 import serial
 
-from drivers.errors import (
+from drivers.core.errors import (
     DeviceFaultError,
     DeviceNotConnectedError,
     DeviceTimeoutError,

@@ -18,7 +18,7 @@ import enum
 import re
 from dataclasses import dataclass
 
-from drivers.errors import ProtocolError
+from drivers.core.errors import ProtocolError
 
 # Printable ASCII plus the control bytes a terminal line may carry. NUL (padding) and BEL (the
 # controller's bell) are dropped; anything else is line noise.

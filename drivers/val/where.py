@@ -13,8 +13,8 @@ import re
 from collections.abc import Sequence
 from dataclasses import dataclass
 
-from drivers.errors import ProtocolError
-from drivers.pose import Pose
+from drivers.core.errors import ProtocolError
+from drivers.core.pose import Pose
 
 _CARTESIAN = ("X", "Y", "Z", "O", "A", "T")
 _JOINTS = ("JT1", "JT2", "JT3", "JT4", "JT5", "JT6")

@@ -10,8 +10,8 @@ from hypothesis import given
 from hypothesis import strategies as st
 
 from calibration_free.angles import decode, encode
-from drivers.errors import ConfigError
-from drivers.pose import wrap_deg
+from drivers.core.errors import ConfigError
+from drivers.core.pose import wrap_deg
 
 
 @pytest.mark.parametrize("kappa", [1, 2, 4, 6])

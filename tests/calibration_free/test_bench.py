@@ -11,7 +11,7 @@ import pytest
 import torch
 
 from calibration_free import bench
-from drivers.errors import ConfigError
+from drivers.core.errors import ConfigError
 
 
 def parse(argv: list[str]) -> argparse.Namespace:

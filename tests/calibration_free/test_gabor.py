@@ -9,8 +9,8 @@ import pytest
 
 from calibration_free.errors import ImageError
 from calibration_free.gabor import GaborBank, GaborConfig, gabor_kernel
-from drivers.errors import ConfigError
-from drivers.typed_config import from_mapping
+from drivers.core.errors import ConfigError
+from drivers.core.typed_config import from_mapping
 
 
 def closed_form(i: int, j: int, p: float, q: float, theta_deg: float, lam: float, sigma: float,

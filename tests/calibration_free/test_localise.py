@@ -10,7 +10,7 @@ from calibration_free.errors import ImageError
 from calibration_free.localise import binarise, localise, otsu_threshold
 from calibration_free.preprocess import IntensityStats, max_channel, normalise
 from calibration_free.synthetic import SyntheticCell, render_at
-from drivers.errors import ConfigError
+from drivers.core.errors import ConfigError
 
 STATS = IntensityStats(mean=110.0, std=35.0)
 

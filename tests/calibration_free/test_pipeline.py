@@ -10,7 +10,7 @@ from calibration_free.dataset import Dataset, random_offsets
 from calibration_free.errors import ImageError, TrainingError
 from calibration_free.pipeline import Perception, train_bundle
 from calibration_free.synthetic import render, render_at
-from drivers.pose import ToolStep
+from drivers.core.pose import ToolStep
 
 from .conftest import KAPPA, NOMINAL_POSE
 

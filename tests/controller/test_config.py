@@ -3,7 +3,7 @@
 import pytest
 
 from controller.config import config_from_mapping, load_config
-from drivers.errors import ConfigError
+from drivers.core.errors import ConfigError
 
 
 def test_defaults_are_the_simulated_cell():

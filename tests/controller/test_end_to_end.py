@@ -8,10 +8,10 @@ import pytest
 from controller.cli import main
 from controller.config import load_config
 from controller.devices import open_devices
+from controller.evaluation.metrics import is_safe
 from controller.fine_positioner import FinePositioner
-from controller.iteration_log import IterationLog, read_log
-from controller.metrics import is_safe
-from drivers.pose import ToolStep
+from controller.loop.iteration_log import IterationLog, read_log
+from drivers.core.pose import ToolStep
 
 pytestmark = pytest.mark.slow
 

@@ -7,19 +7,19 @@ import pytest
 
 from drivers.ati import AtiConfig, AtiStatusError, AtiWrenchSensor
 from drivers.contract import check_wrench
-from drivers.errors import (
+from drivers.core.errors import (
     ConfigError,
     DeviceFaultError,
     DeviceNotConnectedError,
     DeviceTimeoutError,
     ProtocolError,
 )
+from drivers.core.typed_config import from_mapping
 from drivers.interfaces import Lifecycle, Wrench
-from drivers.typed_config import from_mapping
-from sim_backend.ati_emulator import AtiEmulator
-from sim_backend.cell import SimCell
+from sim_backend.cell.scene_config import SceneConfig
+from sim_backend.cell.sim_cell import SimCell
 from sim_backend.devices import SimWrenchSensor
-from sim_backend.scene_config import SceneConfig
+from sim_backend.emulators.ati.emulator import AtiEmulator
 from tests.mocks.fakes import FakeWrenchSensor
 
 LOAD = Wrench(1.5, -2.25, 9.81, 0.12, -0.2, 0.05)

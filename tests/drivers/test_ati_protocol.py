@@ -13,7 +13,7 @@ from drivers.ati.protocol import (
     parse_record,
     reply_lines,
 )
-from drivers.errors import ProtocolError
+from drivers.core.errors import ProtocolError
 
 
 def test_parses_the_manual_example():

@@ -13,18 +13,18 @@ from drivers.camera import OpenCvCamera, OpenCvCameraConfig
 from drivers.camera.drop_counter import DropCounter
 from drivers.camera.frame_reader import to_rgb
 from drivers.contract import check_camera
-from drivers.errors import (
+from drivers.core.errors import (
     ConfigError,
     DeviceFaultError,
     DeviceNotConnectedError,
     DeviceTimeoutError,
 )
+from drivers.core.typed_config import from_mapping
 from drivers.interfaces import Lifecycle
-from drivers.typed_config import from_mapping
-from sim_backend.cell import SimCell
+from sim_backend.cell.scene_config import SceneConfig
+from sim_backend.cell.sim_cell import SimCell
 from sim_backend.devices import SimCamera
-from sim_backend.mjpeg_server import MjpegServer
-from sim_backend.scene_config import SceneConfig
+from sim_backend.emulators.mjpeg.server import MjpegServer
 from tests.mocks.fakes import FakeCamera
 
 LARGE_RGB = (30, 120, 220)

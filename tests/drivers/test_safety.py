@@ -5,8 +5,8 @@ import logging
 import numpy as np
 import pytest
 
-from drivers.errors import MotionRejectedError
-from drivers.pose import Pose, ToolStep
+from drivers.core.errors import MotionRejectedError
+from drivers.core.pose import Pose, ToolStep
 from drivers.safety import SafetyLimits, check_target, check_tool_step, clip_step
 
 HERE = Pose(300.0, 0.0, 150.0, -90.0, 90.0, 0.0)

@@ -9,7 +9,7 @@ import pytest
 from hypothesis import given
 from hypothesis import strategies as st
 
-from drivers.errors import DeviceNotConnectedError, ProtocolError
+from drivers.core.errors import DeviceNotConnectedError, ProtocolError
 from drivers.spacenav import ButtonEvent, MotionEvent, SpacenavClient, resolve_socket_path
 from drivers.spacenav.events import EVENT_BYTES, decode_event
 

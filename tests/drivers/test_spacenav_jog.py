@@ -4,11 +4,11 @@ from __future__ import annotations
 
 import pytest
 
-from drivers.errors import ConfigError
-from drivers.pose import ToolStep
+from drivers.core.errors import ConfigError
+from drivers.core.pose import ToolStep
+from drivers.core.typed_config import from_mapping
 from drivers.spacenav import JogConfig, JogIntegrator, MotionEvent, tool_rate
 from drivers.spacenav.jog import ToolRate, shaped
-from drivers.typed_config import from_mapping
 
 CFG = JogConfig(deadband=10, full_scale=110, max_speed_mm_s=10.0, max_speed_deg_s=20.0,
                 max_period_ms=200)

@@ -8,17 +8,17 @@ import os
 import pytest
 
 from drivers.contract import check_arm
-from drivers.errors import (
+from drivers.core.errors import (
     DeviceFaultError,
     DeviceTimeoutError,
     MotionRejectedError,
     ProtocolError,
 )
+from drivers.core.pose import Pose, ToolStep
 from drivers.interfaces import Lifecycle
-from drivers.pose import Pose, ToolStep
 from drivers.safety import SafetyLimits
 from drivers.val import ValArm, ValConfig
-from sim_backend.val_emulator.server import DEFAULT_GARBAGE, ValEmulator, ValFaults
+from sim_backend.emulators.val.server import DEFAULT_GARBAGE, ValEmulator, ValFaults
 from tests.mocks.fakes import FakeArm
 
 LIMITS = SafetyLimits(max_step_mm=20.0, max_step_deg=30.0)

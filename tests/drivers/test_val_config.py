@@ -5,8 +5,8 @@ from __future__ import annotations
 import pytest
 import yaml
 
-from drivers.errors import ConfigError
-from drivers.typed_config import from_mapping
+from drivers.core.errors import ConfigError
+from drivers.core.typed_config import from_mapping
 from drivers.val import ValCommands, ValConfig
 
 

@@ -6,7 +6,7 @@ import pytest
 from hypothesis import given
 from hypothesis import strategies as st
 
-from drivers.errors import ProtocolError
+from drivers.core.errors import ProtocolError
 from drivers.val.replies import ReplyKind, parse_reply, reply_complete
 
 

@@ -6,8 +6,8 @@ import pytest
 from hypothesis import given
 from hypothesis import strategies as st
 
-from drivers.errors import ProtocolError
-from drivers.pose import Pose
+from drivers.core.errors import ProtocolError
+from drivers.core.pose import Pose
 from drivers.val.where import parse_where
 
 CARTESIAN = ["     X         Y         Z         O         A         T",

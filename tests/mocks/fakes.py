@@ -13,9 +13,9 @@ from collections.abc import Callable
 
 import numpy as np
 
-from drivers.errors import DeviceFaultError, DeviceTimeoutError
+from drivers.core.errors import DeviceFaultError, DeviceTimeoutError
+from drivers.core.pose import Pose, ToolStep
 from drivers.interfaces import Arm, Camera, Frame, Wrench, WrenchSensor
-from drivers.pose import Pose, ToolStep
 from drivers.safety import SafetyLimits
 
 HOME = Pose(300.0, 0.0, 150.0, -90.0, 90.0, 0.0)

@@ -8,9 +8,9 @@ import cv2
 import pytest
 
 from controller.cli import main
-from drivers.pose import ToolStep
+from drivers.core.pose import ToolStep
 from sim_backend import bench
-from sim_backend.scene_config import SceneConfig
+from sim_backend.cell.scene_config import SceneConfig
 from sim_backend.snapshot import parse_offset
 
 

@@ -6,12 +6,12 @@ import numpy as np
 import pytest
 
 from drivers.contract import check_arm, check_camera, check_wrench
-from drivers.errors import DeviceFaultError, MotionRejectedError
-from drivers.pose import ToolStep
+from drivers.core.errors import DeviceFaultError, MotionRejectedError
+from drivers.core.pose import ToolStep
 from drivers.safety import SafetyLimits
-from sim_backend.cell import SimCell
+from sim_backend.cell.scene_config import SceneConfig, SimArmConfig
+from sim_backend.cell.sim_cell import SimCell
 from sim_backend.devices import SimArm, SimCamera, SimWrenchSensor
-from sim_backend.scene_config import SceneConfig, SimArmConfig
 
 
 @pytest.fixture

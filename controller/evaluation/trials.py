@@ -1,0 +1,186 @@
+"""Evaluation on the simulated cell: train on the default scene, test on random placements.
+
+Unless given a model, the system is taught (auto), acquires its grids and trains on the
+default scene. Each trial then places the part at random on the evaluation scene, starts the
+arm at the part's grasp pose displaced uniformly by +/-25 mm and +/-180/kappa deg, runs the
+positioning loop with the ground truth recorded after every move, and (optionally) grasps.
+
+With ``hil`` (``finepos evaluate --hil``) the same simulated cell is served in this process over
+its device emulators (the VAL II monitor and the ATI F/T controller on ptys, the hand camera as
+an MJPEG stream on 127.0.0.1), and teach-in, acquisition, the loop and the grasp use the real
+drivers on them (``controller.evaluation.hil``); only the part's placement and the ground
+truth are taken from the cell directly, as no real cell offers them.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import logging
+import statistics
+import tempfile
+import time
+from collections.abc import Callable, Sequence
+from pathlib import Path
+
+import numpy as np
+from tqdm import tqdm
+
+from controller.devices import open_devices
+from controller.evaluation.hil import open_hil_devices
+from controller.evaluation.metrics import summarise
+from controller.fine_positioner import FinePositioner
+from controller.systems.registry import SYSTEMS, TrainedModel
+from drivers.core.errors import FineposError
+from drivers.core.pose import ToolStep
+
+logger = logging.getLogger(__name__)
+
+OFFSET_MM = 25.0
+PLACEMENT_MM = 30.0
+EVAL_BUDGET = 6.5
+
+
+def with_lighting(config, preset: str | None):
+    """The config with the scene's lighting preset replaced (None: unchanged)."""
+    if preset is None:
+        return config
+    scene = config.scene
+    lighting = dataclasses.replace(scene.lighting, preset=preset)
+    return dataclasses.replace(config, scene=dataclasses.replace(scene, lighting=lighting))
+
+
+def default_scene_config(config):
+    """The config with every scene setting at its default (where training happens)."""
+    return dataclasses.replace(config, scene=type(config.scene)())
+
+
+def train_on_default_scene(system: str, config, work_dir: Path, seed: int,
+                           progress: bool = True, hil: bool = False) -> tuple[TrainedModel, dict]:
+    """Teach (auto), acquire the NN1 and NN2 grids and train, on the default scene."""
+    models, acquisition = train_systems_on_default_scene((system,), config, work_dir, seed,
+                                                         progress, hil)
+    return models[system], acquisition
+
+
+def train_systems_on_default_scene(systems: Sequence[str], config, work_dir: Path, seed: int,
+                                   progress: bool = True, hil: bool = False
+                                   ) -> tuple[dict[str, TrainedModel], dict]:
+    """Teach (auto) and acquire the NN1 and NN2 grids once, then train every system on them.
+
+    Returns the trained models by system name, and what the shared acquisition cost
+    (``acquire_seconds``, ``images``). ``hil``: through the real drivers (module docstring).
+    """
+    train_cfg = default_scene_config(config)
+    with device_opener(hil)(train_cfg, seed=seed) as devices:
+        fp = FinePositioner(devices, train_cfg, state_dir=work_dir)
+        fp.teach_auto()
+        t0 = time.perf_counter()
+        nn1 = fp.acquire("nn1", progress=progress)
+        nn2 = fp.acquire("nn2", progress=progress)
+        acquire_seconds = time.perf_counter() - t0
+        models = {system: fp.train(system) for system in systems}
+    return models, {"acquire_seconds": acquire_seconds, "images": len(nn1) + len(nn2)}
+
+
+def run_trials(system: str, model: TrainedModel, config, trials: int, seed: int, *,
+               work_dir: Path, grasp: bool = True, log=None, progress: bool = True,
+               budget: float = EVAL_BUDGET, on_trial: Callable[[], None] | None = None,
+               hil: bool = False) -> dict:
+    """Random placements and start offsets; returns per-trial states and grasp outcomes.
+
+    ``on_trial`` is called after each trial (progress reporting from another process);
+    ``hil``: through the real drivers (see the module docstring).
+    """
+    rng = np.random.default_rng(seed)
+    states, grasps, per_iteration, outcomes = [], [], [], []
+    with device_opener(hil)(config, seed=seed) as devices:
+        cell = devices.cell
+        if cell is None:
+            raise FineposError("evaluation needs the simulated cell for its ground truth")
+        fp = FinePositioner(devices, config, log=log, state_dir=work_dir)
+        fp.use_model(model)
+        fp.teach_auto()  # the state file records the part's grasp geometry for the grasp
+        x0, y0, _ = cell.object_pose()
+        kappa = cell.kappa
+        period = 360.0 / kappa
+        for _ in tqdm(range(trials), desc=f"evaluate {system}", unit="trial",
+                      disable=not progress, leave=False):
+            devices.arm.open_gripper()
+            x = x0 + rng.uniform(-PLACEMENT_MM, PLACEMENT_MM)
+            y = y0 + rng.uniform(-PLACEMENT_MM, PLACEMENT_MM)
+            cell.place_object(x, y, rng.uniform(0.0, period))
+            nominal = cell.nominal_grasp_pose()
+            dx, dy = rng.uniform(-OFFSET_MM, OFFSET_MM, 2)
+            dphi = rng.uniform(-period / 2, period / 2)
+            fp.move_to(nominal.moved_in_tool_frame(ToolStep(-dx, -dy, 0.0, -dphi)))
+            result = fp.position(budget)
+            states.append(result.states)
+            outcomes.append(result.outcome)
+            per_iteration.extend(result.seconds_per_iteration)
+            if grasp:
+                g = fp.grasp()
+                grasps.append(bool(g.success and cell.holding))
+            if on_trial is not None:
+                on_trial()
+    return {"states": states, "grasps": grasps, "seconds_per_iteration": per_iteration,
+            "outcomes": outcomes, "object": cell_kind(config), "kappa": kappa}
+
+
+def device_opener(hil: bool):
+    """``open_devices``, or with ``hil`` the same cell behind its emulators and the real
+    drivers (``controller.evaluation.hil.open_hil_devices``)."""
+    return open_hil_devices if hil else open_devices
+
+
+def cell_kind(config) -> str:
+    return config.scene.object.kind
+
+
+def evaluate(system: str, config, *, trials: int, seed: int, lighting: str | None = None,
+             model_path: str | Path | None = None, work_dir: str | Path | None = None,
+             grasp: bool = True, log=None, progress: bool = True, hil: bool = False) -> dict:
+    """The ``finepos evaluate`` report (see the README for its fields); ``hil``: through the
+    real drivers and the device emulators (see the module docstring)."""
+    if system not in SYSTEMS:
+        raise FineposError(f"unknown system {system!r} (one of {', '.join(SYSTEMS)})")
+    eval_cfg = with_lighting(config, lighting)
+    with tempfile.TemporaryDirectory(prefix="finepos-eval-") as tmp:
+        work = Path(work_dir or tmp)
+        if model_path is not None:
+            model = SYSTEMS[system].load(model_path)
+            acquisition = {"acquire_seconds": None, "images": model.train_images}
+        else:
+            model, acquisition = train_on_default_scene(system, config, work / "train", seed,
+                                                        progress, hil)
+        run = run_trials(system, model, eval_cfg, trials, seed, work_dir=work / "eval",
+                         grasp=grasp, log=log, progress=progress, hil=hil)
+    report = build_report(system, config, eval_cfg, trials=trials, seed=seed, model=model,
+                          acquisition=acquisition, run=run)
+    report["hil"] = hil
+    return report
+
+
+def build_report(system: str, config, eval_cfg, *, trials: int, seed: int,
+                 model: TrainedModel, acquisition: dict, run: dict) -> dict:
+    """The ``finepos evaluate`` report of one ``run_trials`` result (``config``: the one the
+    model was trained from; ``eval_cfg``: the one the trials ran on)."""
+    summary = summarise(run["states"])
+    report = {
+        "system": system,
+        "lighting": eval_cfg.scene.lighting.preset,
+        "object": run["object"],
+        "trials": trials,
+        "seed": seed,
+        **summary,
+        "grasp_success_rate": (float(np.mean(run["grasps"])) if run["grasps"] else None),
+        "train_images": model.train_images,
+        "train_seconds": model.train_seconds,
+        "acquire_seconds": acquisition["acquire_seconds"],
+        "feature_count": model.feature_count,
+        "seconds_per_loop": (statistics.median(run["seconds_per_iteration"])
+                             if run["seconds_per_iteration"] else None),
+        "outcomes": {k: run["outcomes"].count(k) for k in sorted(set(run["outcomes"]))},
+        "scene": config.source,
+    }
+    report["_trial_states"] = [[(s.loops, s.error) for s in t] for t in run["states"]]
+    return report

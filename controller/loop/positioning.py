@@ -1,0 +1,194 @@
+"""The fine-positioning loop of the paper (Fig. 4): half loops while far, then full loops.
+
+grab -> estimate translation -> if |(dx, dy)| > r_fine: move (dx, dy) and look again (a half
+loop, counts 0.5) -> else estimate rotation (with a translation refined by it, where the
+system has one) and move (dx, dy, dphi) (a full loop, counts 1) ->
+repeat until a full look finds a step below the convergence thresholds (no move, the pose is
+reached) or the loop budget is spent. "No object" / "ambiguous" stop without moving. Every
+step passes the arm's safety layer; a rejected step stops the loop.
+"""
+
+from __future__ import annotations
+
+import logging
+import math
+import time
+import uuid
+from collections.abc import Callable
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any, Literal
+
+import cv2
+
+from controller.loop.iteration_log import IterationLog
+from controller.systems.estimator import Estimator
+from drivers.core.errors import MotionRejectedError
+from drivers.core.pose import ToolStep
+from drivers.interfaces import Arm, Camera
+
+logger = logging.getLogger(__name__)
+
+GroundTruth = Callable[[], tuple[float, float, float]]
+Outcome = Literal["converged", "budget", "no_object", "ambiguous", "rejected"]
+
+
+@dataclass(frozen=True)
+class LoopConfig:
+    """Config section ``controller.loop``.
+
+    r_fine_mm: above this translation only half (translation) loops are made (paper: 4 mm);
+    converge_mm / converge_deg: a full look whose step is below both ends the loop;
+    max_loops: loop budget (half = 0.5, full = 1);
+    save_images: save each grabbed image as PNG next to the iteration log.
+    """
+
+    r_fine_mm: float = field(default=4.0, metadata={"min": 0.0})
+    converge_mm: float = field(default=0.1, metadata={"min": 0.0})
+    converge_deg: float = field(default=0.5, metadata={"min": 0.0})
+    max_loops: float = field(default=6.0, metadata={"min": 0.5})
+    save_images: bool = False
+
+
+@dataclass(frozen=True)
+class LoopState:
+    """The state after a move (or at the start): cumulative loops and, when known, the error."""
+
+    loops: float
+    error: tuple[float, float, float] | None
+
+
+@dataclass
+class PositioningResult:
+    """outcome: converged | budget | no_object | ambiguous | rejected; reason in words;
+    loops: cumulative loop count spent; states: LoopState at the start and after every move;
+    seconds_per_iteration: wall time of each look-and-move iteration."""
+
+    run_id: str
+    outcome: Outcome
+    reason: str
+    loops: float
+    iterations: int
+    states: list[LoopState]
+    seconds_per_iteration: list[float]
+
+    @property
+    def ok(self) -> bool:
+        return self.outcome in ("converged", "budget")
+
+
+class PositioningLoop:
+    """Runs the half/full loop with one estimator on one arm and camera."""
+
+    def __init__(self, arm: Arm, camera: Camera, config: LoopConfig,
+                 log: IterationLog | None = None, ground_truth: GroundTruth | None = None,
+                 image_dir: str | Path | None = None) -> None:
+        self.arm = arm
+        self.camera = camera
+        self.config = config
+        self.log = log
+        self.ground_truth = ground_truth
+        self.image_dir = Path(image_dir) if image_dir else (log.path.parent if log else None)
+        self._abort = False
+
+    def abort(self) -> None:
+        """Ask a running loop to stop before its next move (thread-safe flag)."""
+        self._abort = True
+
+    def _error(self) -> tuple[float, float, float] | None:
+        return tuple(self.ground_truth()) if self.ground_truth else None
+
+    def run(self, estimator: Estimator, max_loops: float | None = None,
+            run_id: str | None = None) -> PositioningResult:
+        cfg = self.config
+        budget = cfg.max_loops if max_loops is None else max_loops
+        run_id = run_id or uuid.uuid4().hex[:12]
+        self._abort = False
+        loops, iteration = 0.0, 0
+        states = [LoopState(0.0, self._error())]
+        per_iteration: list[float] = []
+
+        def finish(outcome: Outcome, reason: str) -> PositioningResult:
+            logger.debug("positioning %s: %s after %.1f loops (%s)", run_id, outcome, loops,
+                         reason)
+            return PositioningResult(run_id, outcome, reason, loops, iteration, states,
+                                     per_iteration)
+
+        while True:
+            if self._abort:
+                return finish("rejected", "aborted")
+            t0 = time.perf_counter()
+            frame = self.camera.grab()
+            t1 = time.perf_counter()
+            tr = estimator.estimate_translation(frame.image)
+            record: dict[str, Any] = {
+                "time": time.time(), "run_id": run_id, "system": estimator.name,
+                "iteration": iteration + 1, "u_px": tr.u_px, "v_px": tr.v_px,
+                "status": tr.status, **tr.record,
+            }
+            if tr.status != "ok":
+                t2 = time.perf_counter()
+                self._write(record, "stop", loops, None, None, False, None, t0, t1, t2, t2,
+                            frame.image, states[-1].error)
+                return finish(tr.status, tr.reason or tr.status)
+            shift = math.hypot(tr.dx_mm, tr.dy_mm)
+            if shift > cfg.r_fine_mm:
+                kind, cost = "half", 0.5
+                step = ToolStep(tr.dx_mm, tr.dy_mm, 0.0, 0.0)
+            else:
+                kind, cost = "full", 1.0
+                rot = estimator.estimate_rotation(frame.image, tr)
+                record.update(rot.record)
+                if rot.dx_mm is not None and rot.dy_mm is not None:
+                    shift = math.hypot(rot.dx_mm, rot.dy_mm)
+                    step = ToolStep(rot.dx_mm, rot.dy_mm, 0.0, rot.dphi_deg)
+                else:
+                    step = ToolStep(tr.dx_mm, tr.dy_mm, 0.0, rot.dphi_deg)
+            t2 = time.perf_counter()
+            if kind == "full" and shift <= cfg.converge_mm and \
+                    abs(step.dphi_deg) <= cfg.converge_deg:
+                self._write(record, "check", loops, step, None, False, None, t0, t1, t2, t2,
+                            frame.image, states[-1].error)
+                return finish("converged", f"step {shift:.3f} mm / {step.dphi_deg:.2f} deg "
+                                           "below the convergence thresholds")
+            if loops + cost > budget + 1e-9:
+                self._write(record, "stop", loops, step, None, False, None, t0, t1, t2, t2,
+                            frame.image, states[-1].error)
+                return finish("budget", f"loop budget {budget:g} spent")
+            try:
+                motion = self.arm.move_tool(step)
+            except MotionRejectedError as exc:
+                t3 = time.perf_counter()
+                record["rejected"] = exc.reason
+                self._write(record, "stop", loops, step, None, False, None, t0, t1, t2, t3,
+                            frame.image, states[-1].error)
+                return finish("rejected", f"safety layer rejected the step: {exc.reason}")
+            t3 = time.perf_counter()
+            loops += cost
+            iteration += 1
+            error = self._error()
+            states.append(LoopState(loops, error))
+            per_iteration.append(t3 - t0)
+            self._write(record, kind, loops, step, motion.sent, motion.clipped, motion.pose,
+                        t0, t1, t2, t3, frame.image, error)
+
+    def _write(self, record, kind, loops, commanded, executed, clipped, pose_after,
+               t0, t1, t2, t3, image, error=None) -> None:
+        if self.log is None:
+            return
+        record.update({
+            "loop_kind": kind, "loops": loops,
+            "commanded": commanded.as_dict() if commanded else None,
+            "executed": executed.as_dict() if executed else None, "clipped": clipped,
+            "pose_after": pose_after.as_dict() if pose_after else None,
+            "timings_ms": {"grab": (t1 - t0) * 1e3, "perceive": (t2 - t1) * 1e3,
+                           "move": (t3 - t2) * 1e3},
+            "error": ({"x_mm": error[0], "y_mm": error[1], "phi_deg": error[2]}
+                      if error is not None else None),
+        })
+        if self.config.save_images and self.image_dir is not None:
+            name = f"{record['run_id']}-{record['iteration']:03d}-{kind}.png"
+            self.image_dir.mkdir(parents=True, exist_ok=True)
+            cv2.imwrite(str(self.image_dir / name), cv2.cvtColor(image, cv2.COLOR_RGB2BGR))
+            record["image"] = name
+        self.log.write(record)

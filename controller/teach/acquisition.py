@@ -1,0 +1,86 @@
+"""Automatic acquisition of training and test images around the taught nominal pose.
+
+For each displacement (dx, dy, dphi) of a grid (or a random set), the arm is moved to the
+nominal pose displaced by -(dx, dy, dphi) in its tool frame, an image is grabbed, and the
+label is the exact tool-frame step from the pose actually reached back to the nominal pose
+(so the arm's repeatability error is in the label, not in the network). Grids are visited in
+serpentine order so consecutive moves stay short.
+"""
+
+from __future__ import annotations
+
+import logging
+import time
+from collections.abc import Callable
+
+import numpy as np
+from tqdm import tqdm
+
+from calibration_free.dataset import Dataset, grid_offsets, random_offsets
+from drivers.core.pose import Pose, ToolStep
+from drivers.interfaces import Arm, Camera
+
+logger = logging.getLogger(__name__)
+
+
+def serpentine(offsets: np.ndarray) -> np.ndarray:
+    """Order displacements so each move to the next one is short (boustrophedon on x, y)."""
+    offsets = np.asarray(offsets, dtype=float)
+    xs = np.unique(offsets[:, 0])
+    ordered = []
+    for i, x in enumerate(xs):
+        row = offsets[offsets[:, 0] == x]
+        row = row[np.lexsort((row[:, 2], row[:, 1]))]
+        ordered.append(row if i % 2 == 0 else row[::-1])
+    return np.concatenate(ordered)
+
+
+def transfer(arm: Arm, target: Pose, max_step_mm: float, max_step_deg: float) -> None:
+    """Move to ``target`` in segments no longer than the given step limits."""
+    here = arm.pose()
+    step = here.tool_step_to(target)
+    n = max(1, int(np.ceil(max(step.translation_mm / max_step_mm,
+                               abs(step.dphi_deg) / max_step_deg) - 1e-9)))
+    for i in range(1, n + 1):
+        f = i / n
+        arm.move_to(here.moved_in_tool_frame(
+            ToolStep(step.dx_mm * f, step.dy_mm * f, step.dz_mm * f, step.dphi_deg * f)))
+
+
+def acquire(arm: Arm, camera: Camera, nominal: Pose, offsets: np.ndarray, *,
+            name: str, metadata: dict | None = None, limits=None,
+            ground_truth: Callable[[], tuple[float, float, float]] | None = None,
+            progress: bool = True) -> Dataset:
+    """Grab one image per displacement; returns the labelled dataset and returns to nominal."""
+    max_mm = limits.max_step_mm if limits else 1e9
+    max_deg = limits.max_step_deg if limits else 1e9
+    images, labels, truth = [], [], []
+    t0 = time.perf_counter()
+    for dx, dy, dphi in tqdm(offsets, desc=f"acquire {name}", unit="img", disable=not progress,
+                             leave=False):
+        target = nominal.moved_in_tool_frame(ToolStep(-dx, -dy, 0.0, -dphi))
+        transfer(arm, target, max_mm, max_deg)
+        reached = arm.pose()
+        images.append(camera.grab().image)
+        back = reached.tool_step_to(nominal)
+        labels.append((back.dx_mm, back.dy_mm, back.dphi_deg))
+        if ground_truth is not None:
+            truth.append(ground_truth())
+    transfer(arm, nominal, max_mm, max_deg)
+    meta = {"set": name, "count": len(labels), "seconds": time.perf_counter() - t0,
+            "nominal_pose": nominal.as_dict(), **(metadata or {})}
+    samples = ([{"ground_truth_error": [float(v) for v in t]} for t in truth]
+               if truth else None)
+    logger.info("acquired %d images for %s in %.1f s", len(labels), name, meta["seconds"])
+    return Dataset(images=np.stack(images), labels=np.asarray(labels, dtype=np.float64),
+                   samples=samples, metadata=meta)
+
+
+def grid_for(grid_cfg, kappa: int) -> np.ndarray:
+    """The displacement grid of a GridConfig (b = 180/kappa unless set), serpentine ordered."""
+    b = grid_cfg.b_deg if grid_cfg.b_deg is not None else 180.0 / max(kappa, 1)
+    return serpentine(grid_offsets(grid_cfg.a_mm, b, tuple(grid_cfg.shape)))
+
+
+def random_set(rng: np.random.Generator, n: int, a_mm: float, kappa: int) -> np.ndarray:
+    return random_offsets(rng, n, a_mm, 180.0 / max(kappa, 1))

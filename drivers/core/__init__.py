@@ -1,0 +1,6 @@
+"""The shared core of finepos: typed errors, pose math, strict config loading, atomic files,
+and the parts catalogue.
+
+Imports nothing else of finepos, so every package (drivers, calibration_free, sim_backend,
+controller) can build on it without a circle.
+"""

@@ -1,0 +1,159 @@
+"""One simulated cell behind the real devices' wire protocols: VAL arm, ATI sensor, MJPEG camera.
+
+For hardware-in-the-loop runs on one machine: ``CellEmulators(cell, ...)`` serves the cell's
+arm as the VAL II monitor (a pty, or TCP on 127.0.0.1), optionally its wrist sensor as an ATI
+F/T controller (a second pty, or TCP) and its hand camera as an MJPEG stream over HTTP on
+127.0.0.1. The real drivers (``drivers.val``, ``drivers.ati``, ``drivers.camera``) connect to
+``val_url``, ``ati_url`` and ``stream_url``; whatever moves through the VAL monitor is what the
+sensor feels and the camera sees.
+
+The emulators serve from their own threads and PyBullet is not thread-safe, so the cell they
+share is wrapped in a ``SerialisedCell``: every call into it holds one lock. A caller that uses
+the cell directly (placing the part, reading the ground truth) must go through ``cell`` (the
+wrapped one) too. The simulated arm behind the monitor has no safety limits: the VAL driver
+applies them, as on the real cell.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import functools
+import logging
+import threading
+from typing import Any
+
+from sim_backend.cell.sim_cell import SimCell
+from sim_backend.devices import SimArm, SimCamera, SimWrenchSensor
+from sim_backend.emulators.ati.emulator import AtiEmulator
+from sim_backend.emulators.mjpeg.server import MjpegServer
+from sim_backend.emulators.val.server import ValEmulator, ValFaults
+from sim_backend.emulators.val.sim_arm import SIM_KINEMATICS
+
+logger = logging.getLogger(__name__)
+
+DEFAULT_FPS = 30.0
+
+
+class SerialisedCell:
+    """A SimCell shared by several threads: every attribute read and method call on it holds
+    ``lock``, so an arm move, a render and a wrench reading never interleave."""
+
+    def __init__(self, cell: SimCell) -> None:
+        self._cell = cell
+        self.lock = threading.RLock()
+
+    def __getattr__(self, name: str) -> Any:
+        with self.lock:
+            value = getattr(self._cell, name)
+        if not callable(value):
+            return value
+
+        @functools.wraps(value)
+        def locked(*args, **kwargs):
+            with self.lock:
+                return value(*args, **kwargs)
+
+        return locked
+
+
+class CellEmulators:
+    """Serves ``cell`` over the VAL emulator and, when asked, the ATI emulator and an MJPEG
+    stream. Use as a context manager; the caller owns ``cell`` (close it after this).
+
+    Args:
+        cell: the simulated cell to serve.
+        val_tcp_port: serve VAL on 127.0.0.1:PORT (0: any free) instead of a pty.
+        ati: also serve the wrist sensor as an ATI F/T controller.
+        ati_tcp_port: serve it on 127.0.0.1:PORT (0: any free) instead of a pty.
+        mjpeg_port: also serve the hand camera on http://127.0.0.1:PORT (0: any free port).
+        fps: frame rate of the stream.
+        boot_questions / faults: the VAL emulator's start-up questions and fault knobs.
+        counts_per_force / counts_per_torque: the emulated ATI controller's calibration (the
+            driver's config must use the same).
+    """
+
+    def __init__(self, cell: SimCell, *, val_tcp_port: int | None = None, ati: bool = False,
+                 ati_tcp_port: int | None = None, mjpeg_port: int | None = None,
+                 fps: float = DEFAULT_FPS, boot_questions: bool = False,
+                 faults: ValFaults | None = None, counts_per_force: float = 20.0,
+                 counts_per_torque: float = 333.33) -> None:
+        self.cell = SerialisedCell(cell)
+        self._val_tcp_port = val_tcp_port
+        self._ati = ati or ati_tcp_port is not None
+        self._ati_tcp_port = ati_tcp_port
+        self._mjpeg_port = mjpeg_port
+        self._fps = fps
+        self._boot_questions = boot_questions
+        self._faults = faults
+        self._counts = (counts_per_force, counts_per_torque)
+        self._stack = contextlib.ExitStack()
+        self.val: ValEmulator | None = None
+        self.ati: AtiEmulator | None = None
+        self.mjpeg: MjpegServer | None = None
+
+    @property
+    def val_url(self) -> str:
+        """The VAL driver's ``port`` (``/dev/pts/N`` or ``socket://127.0.0.1:N``)."""
+        if self.val is None:
+            raise RuntimeError("CellEmulators is not started")
+        return self.val.url
+
+    @property
+    def ati_url(self) -> str | None:
+        """The ATI driver's ``port``, or None when the sensor is not served."""
+        return self.ati.url if self.ati is not None else None
+
+    @property
+    def stream_url(self) -> str | None:
+        """The camera driver's ``source`` (``http://127.0.0.1:N/stream.mjpg``), or None."""
+        return self.mjpeg.stream_url if self.mjpeg is not None else None
+
+    def device_sections(self) -> dict[str, dict]:
+        """Config sections (``arm``, and ``wrench`` and ``camera`` where served) that point the
+        real drivers at these emulators.
+
+        VAL reports no finger width, so the VAL driver's nominal closed width is set to the
+        simulated part's: the grasp's grip check then passes when the jaws close on the part.
+        """
+        sections: dict[str, dict] = {"arm": {
+            "type": "val", "port": self.val_url,
+            "gripper_closed_width_mm": self.cell.part.grasp_width_mm}}
+        if self.ati_url is not None:
+            sections["wrench"] = {"type": "ati", "port": self.ati_url}
+        if self.stream_url is not None:
+            sections["camera"] = {"type": "opencv", "source": self.stream_url}
+        return sections
+
+    def start(self) -> CellEmulators:
+        """Connect the simulated devices and start every emulator asked for."""
+        stack = self._stack
+        try:
+            arm = stack.enter_context(SimArm(self.cell, None))
+            self.val = stack.enter_context(ValEmulator(
+                arm, tcp_port=self._val_tcp_port, boot_questions=self._boot_questions,
+                kinematics=SIM_KINEMATICS, faults=self._faults))
+            if self._ati:
+                sensor = stack.enter_context(SimWrenchSensor(self.cell))
+                self.ati = stack.enter_context(AtiEmulator(sensor, *self._counts,
+                                                           tcp_port=self._ati_tcp_port))
+            if self._mjpeg_port is not None:
+                camera = stack.enter_context(SimCamera(self.cell))
+                self.mjpeg = stack.enter_context(MjpegServer(camera, port=self._mjpeg_port,
+                                                             fps=self._fps))
+        except BaseException:
+            self.close()
+            raise
+        logger.info("cell emulators: VAL %s, ATI %s, camera %s", self.val_url, self.ati_url,
+                    self.stream_url)
+        return self
+
+    def close(self) -> None:
+        """Stop every emulator, in reverse order of starting (idempotent)."""
+        self._stack.close()
+        self.val = self.ati = self.mjpeg = None
+
+    def __enter__(self) -> CellEmulators:
+        return self.start()
+
+    def __exit__(self, *exc_info) -> None:
+        self.close()

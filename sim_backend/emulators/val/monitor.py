@@ -1,0 +1,305 @@
+"""The VAL II monitor as a state machine over any ``drivers.interfaces.Arm``: lines in, text out.
+
+No I/O here: the serving thread (``server``) feeds it one input line at a time and writes back the
+echo and the reply. What it speaks (confirmed behaviour from the hardware notes, plus the
+unconfirmed commands the VAL driver's defaults send):
+
+- prompt ``.`` at the start of a line after every command; questions end in ``? ``;
+- optional boot questions ``Load VAL from floppy (Y/N)?`` then ``Initialize (Y/N)?``;
+- ``where`` (``X Y Z O A T`` table, then ``JT1..JT6`` when the pose has a joint solution),
+  ``speed N``, ``do move trans(x,y,z,o,a,t)``, ``do move name``, ``do move #name``,
+  ``do drive joint,deg,speed``, ``do ready``, ``do nest``, ``point #name`` / ``point name``
+  (``poi``) with their ``Change?`` dialogues, ``cal`` + ``y``; unconfirmed: ``do openi``,
+  ``do closei`` (also ``do open`` / ``do close``), ``abort``;
+- errors as ``*text*`` lines: unreachable poses (the arm's MotionRejectedError, or joints out of
+  range) give ``*Position out of range*``; other arm failures give the arm's message.
+
+Commands are case-insensitive; monitor commands may be abbreviated (``poi``, ``cal``, ``sp``).
+"""
+
+from __future__ import annotations
+
+import logging
+import re
+from collections.abc import Callable
+from dataclasses import dataclass
+
+from drivers.core.errors import FineposError, MotionRejectedError
+from drivers.core.pose import Pose
+from drivers.interfaces import Arm
+from sim_backend.emulators.val.kinematics import (
+    NEST_DEG,
+    READY_DEG,
+    TOOL_DOWN_DEG,
+    Joints,
+    Puma260,
+    within_ranges,
+)
+
+logger = logging.getLogger(__name__)
+
+OUT_OF_RANGE = "Position out of range"
+SYNTAX_ERROR = "Syntax error"
+UNKNOWN_COMMAND = "Unknown command"
+UNDEFINED_LOCATION = "Undefined location"
+VALUE_OUT_OF_RANGE = "Value out of range"
+
+BOOT_QUESTIONS = ("Load VAL from floppy (Y/N)? ", "Initialize (Y/N)? ")
+CAL_QUESTION = "Are you sure (Y/N)? "
+CHANGE_QUESTION = "Change? "
+PROMPT = "."
+
+# Monitor commands and the shortest abbreviation accepted for each.
+_MONITOR_COMMANDS = {"where": 1, "speed": 2, "point": 3, "calibrate": 3, "abort": 2, "do": 2}
+_NUMBER = re.compile(r"[+-]?(?:\d+\.?\d*|\.\d+)(?:[eE][+-]?\d+)?")
+_NAME = re.compile(r"#?[a-z][a-z0-9_.]*")
+_TRANS = re.compile(r"trans\s*\((?P<args>[^()]*)\)", re.IGNORECASE)
+_CARTESIAN_HEADER = "".join(f"{label:>10}" for label in "XYZOAT")
+_JOINT_HEADER = "".join(f"{label:>10}" for label in ("JT1", "JT2", "JT3", "JT4", "JT5", "JT6"))
+
+
+class _Refusal(Exception):
+    """A command the monitor answers with ``*message*``."""
+
+
+@dataclass(frozen=True)
+class Response:
+    """What the monitor sends for one input line: the echo, then the reply."""
+
+    echo: bytes
+    reply: bytes
+
+
+def _text(lines: list[str], tail: str) -> bytes:
+    text = "".join(f"{line}\r\n" for line in lines) + tail
+    return text.encode("ascii", "replace")
+
+
+def _numbers(text: str, count: int) -> list[float]:
+    fields = [f.strip() for f in text.split(",")]
+    if len(fields) != count or not all(_NUMBER.fullmatch(f) for f in fields):
+        raise _Refusal(SYNTAX_ERROR)
+    return [float(f) for f in fields]
+
+
+def _column(value: float, decimals: int) -> str:
+    return f"{round(value, decimals) + 0.0:10.{decimals}f}"  # + 0.0: no "-0.000"
+
+
+def _pose_lines(pose: Pose) -> list[str]:
+    values = [_column(v, 2) for v in (pose.x_mm, pose.y_mm, pose.z_mm)]
+    values += [_column(v, 3) for v in (pose.o_deg, pose.a_deg, pose.t_deg)]
+    return [_CARTESIAN_HEADER, "".join(values)]
+
+
+def _joint_lines(joints: Joints) -> list[str]:
+    return [_JOINT_HEADER, "".join(_column(q, 3) for q in joints)]
+
+
+class ValMonitor:
+    """One VAL II monitor session driving ``arm`` (connected and active, without safety limits:
+    the VAL driver applies those)."""
+
+    def __init__(self, arm: Arm, kinematics: Puma260 | None = None,
+                 boot_questions: bool = False) -> None:
+        self._arm = arm
+        self._kinematics = kinematics or Puma260()
+        self._pending: Callable[[str], bytes] | None = None  # handles the answer to a question
+        self._first_output = _text([], PROMPT)
+        if boot_questions:
+            self._first_output = _text([], BOOT_QUESTIONS[0])
+            self._pending = self._boot_answer(0)
+        self._seed: Joints = TOOL_DOWN_DEG
+        self._known: tuple[Pose, Joints] | None = None
+        self._transformations: dict[str, Pose] = {}
+        self._precision_points: dict[str, Joints] = {}
+
+    def first_output(self) -> bytes:
+        """What the controller prints when it comes up: the first boot question or the prompt."""
+        return self._first_output
+
+    def handle_line(self, line: str, forced_error: str | None = None) -> Response:
+        """Answer one input line. ``forced_error`` replaces the reply to a command (not to an
+        answer) with ``*forced_error*`` and does not run the command."""
+        echo = line.encode("latin-1") + b"\r\n"
+        if self._pending is not None:
+            return Response(echo, self._pending(line))
+        if forced_error is not None:
+            return Response(echo, _text([f"*{forced_error}*"], PROMPT))
+        try:
+            return Response(echo, self._command(line))
+        except _Refusal as refusal:
+            return Response(echo, _text([f"*{refusal}*"], PROMPT))
+
+    # -- questions -----------------------------------------------------------------------------
+    def _ask(self, lines: list[str], question: str, handler: Callable[[str], bytes]) -> bytes:
+        self._pending = handler
+        return _text(lines, question)
+
+    def _yes_no(self, question: str, on_answer: Callable[[bool], bytes]) -> Callable[[str], bytes]:
+        def handle(answer: str) -> bytes:
+            word = answer.strip().lower()
+            if word not in ("y", "n", "yes", "no"):
+                return _text([], question)  # ask again
+            self._pending = None
+            return on_answer(word.startswith("y"))
+        return handle
+
+    def _boot_answer(self, index: int) -> Callable[[str], bytes]:
+        def after(_yes: bool) -> bytes:
+            if index + 1 < len(BOOT_QUESTIONS):
+                return self._ask([], BOOT_QUESTIONS[index + 1], self._boot_answer(index + 1))
+            return _text([], PROMPT)
+        return self._yes_no(BOOT_QUESTIONS[index], after)
+
+    # -- commands ------------------------------------------------------------------------------
+    def _command(self, line: str) -> bytes:
+        words = line.strip().split(None, 1)
+        if not words:
+            return _text([], PROMPT)
+        head, rest = words[0].lower(), (words[1] if len(words) > 1 else "")
+        name = next((full for full, shortest in _MONITOR_COMMANDS.items()
+                     if len(head) >= shortest and full.startswith(head)), None)
+        if name == "where" and not rest.strip():
+            return self._where()
+        if name == "speed":
+            return self._speed(rest)
+        if name == "point":
+            return self._point(rest.strip().lower())
+        if name == "calibrate" and not rest.strip():
+            return self._ask([], CAL_QUESTION, self._yes_no(CAL_QUESTION, self._calibrated))
+        if name == "abort" and not rest.strip():
+            self._arm_call(self._arm.halt)
+            return _text([], PROMPT)
+        if name == "do":
+            return self._do(rest.strip())
+        raise _Refusal(UNKNOWN_COMMAND if name is None else SYNTAX_ERROR)
+
+    def _calibrated(self, yes: bool) -> bytes:
+        logger.info("VAL emulator: calibration %s", "done" if yes else "skipped")
+        return _text([], PROMPT)
+
+    def _where(self) -> bytes:
+        pose = self._arm_call(self._arm.pose)
+        joints = self._joints(pose)
+        return _text(_pose_lines(pose) + (_joint_lines(joints) if joints else []), PROMPT)
+
+    def _speed(self, rest: str) -> bytes:
+        (percent,) = _numbers(rest, 1)
+        if not 0 < percent <= 100:
+            raise _Refusal(VALUE_OUT_OF_RANGE)
+        self._arm_call(self._arm.set_speed, percent)
+        return _text([], PROMPT)
+
+    def _do(self, rest: str) -> bytes:
+        words = rest.split(None, 1)
+        instruction = words[0].lower() if words else ""
+        argument = words[1].strip() if len(words) > 1 else ""
+        if instruction == "move" and argument:
+            self._move_to_location(argument)
+        elif instruction == "drive" and argument:
+            self._drive(argument)
+        elif instruction in ("ready", "nest") and not argument:
+            self._move_joints(READY_DEG if instruction == "ready" else NEST_DEG)
+        elif instruction in ("openi", "open") and not argument:
+            self._arm_call(self._arm.open_gripper)
+        elif instruction in ("closei", "close") and not argument:
+            self._arm_call(self._arm.close_gripper)
+        else:
+            raise _Refusal(SYNTAX_ERROR)
+        return _text([], PROMPT)
+
+    def _move_to_location(self, argument: str) -> None:
+        trans = _TRANS.fullmatch(argument)
+        if trans:
+            self._move_pose(Pose(*_numbers(trans.group("args"), 6)))
+            return
+        name = argument.lower()
+        if not _NAME.fullmatch(name):
+            raise _Refusal(SYNTAX_ERROR)
+        if name.startswith("#"):
+            if name not in self._precision_points:
+                raise _Refusal(UNDEFINED_LOCATION)
+            self._move_joints(self._precision_points[name])
+        else:
+            if name not in self._transformations:
+                raise _Refusal(UNDEFINED_LOCATION)
+            self._move_pose(self._transformations[name])
+
+    def _drive(self, argument: str) -> None:
+        joint, delta_deg, speed_percent = _numbers(argument, 3)
+        if joint != int(joint) or not 1 <= joint <= 6:
+            raise _Refusal(SYNTAX_ERROR)
+        if not 0 < speed_percent <= 100:
+            raise _Refusal(VALUE_OUT_OF_RANGE)
+        joints = self._joints(self._arm_call(self._arm.pose))
+        if joints is None:
+            raise _Refusal(OUT_OF_RANGE)
+        target = list(joints)
+        target[int(joint) - 1] += delta_deg
+        self._move_joints(tuple(target))
+
+    def _move_pose(self, target: Pose) -> None:
+        self._arm_call(self._arm.move_to, target)
+
+    def _move_joints(self, joints: Joints) -> None:
+        if not within_ranges(joints):
+            raise _Refusal(OUT_OF_RANGE)
+        self._arm_call(self._arm.move_to, self._kinematics.forward(joints))
+        self._seed, self._known = joints, None
+
+    def _joints(self, pose: Pose) -> Joints | None:
+        """Joint angles of ``pose`` (cached; solved near the last known joints)."""
+        if self._known is not None and self._known[0] == pose:
+            return self._known[1]
+        joints = self._kinematics.inverse(pose, self._seed)
+        if joints is not None:
+            self._seed, self._known = joints, (pose, joints)
+        return joints
+
+    def _arm_call(self, method, *args):
+        try:
+            return method(*args)
+        except MotionRejectedError as exc:
+            logger.info("VAL emulator: arm refused: %s", exc)
+            raise _Refusal(OUT_OF_RANGE) from exc
+        except FineposError as exc:
+            logger.warning("VAL emulator: arm failed: %s", exc)
+            message = " ".join(str(exc).replace("*", " ").split()) or type(exc).__name__
+            raise _Refusal(message) from exc
+
+    # -- point dialogues -----------------------------------------------------------------------
+    def _point(self, name: str) -> bytes:
+        if not _NAME.fullmatch(name):
+            raise _Refusal(SYNTAX_ERROR)
+        if name.startswith("#"):
+            joints = self._precision_points.get(name)
+            if joints is None:
+                joints = self._joints(self._arm_call(self._arm.pose))
+            if joints is None:
+                raise _Refusal(OUT_OF_RANGE)
+            return self._edit(name, list(joints))
+        pose = self._transformations.get(name) or self._arm_call(self._arm.pose)
+        return self._edit(name, list(pose.as_dict().values()))
+
+    def _edit(self, name: str, values: list[float]) -> bytes:
+        """Show ``values`` and ask ``Change?``: a line of comma-separated values (empty fields
+        keep theirs) changes them, an empty line stores the location and ends the dialogue."""
+        precision = name.startswith("#")
+        lines = _joint_lines(tuple(values)) if precision else _pose_lines(Pose(*values))
+
+        def answer(text: str) -> bytes:
+            if not text.strip():
+                self._pending = None
+                if precision:
+                    self._precision_points[name] = tuple(values)  # type: ignore[assignment]
+                else:
+                    self._transformations[name] = Pose(*values)
+                return _text([], PROMPT)
+            fields = [f.strip() for f in text.split(",")]
+            if len(fields) > 6 or not all(not f or _NUMBER.fullmatch(f) for f in fields):
+                return self._ask([f"*{SYNTAX_ERROR}*"] + lines, CHANGE_QUESTION, answer)
+            changed = [float(f) if f else old for f, old in zip(fields, values, strict=False)]
+            return self._edit(name, changed + values[len(changed):])
+
+        return self._ask(lines, CHANGE_QUESTION, answer)

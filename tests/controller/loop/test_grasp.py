@@ -1,0 +1,114 @@
+"""Force guards (pure) and the guarded grasp sequence on fakes."""
+
+import pytest
+
+from controller.loop.grasp import GraspConfig, guarded_grasp
+from controller.loop.guards import Guard, first_tripped, tripped
+from drivers.interfaces import Wrench
+from tests.mocks.fakes import FakeArm, FakeWrenchSensor
+
+ZERO = Wrench(0, 0, 0, 0, 0, 0)
+
+
+def w(fz=0.0, fx=0.0, tz=0.0):
+    return Wrench(fx, 0.0, fz, 0.0, 0.0, tz)
+
+
+@pytest.mark.parametrize("guard,reading,expected", [
+    (Guard("fz_n", ">", 5.0, "stop"), w(fz=5.1), True),
+    (Guard("fz_n", ">", 5.0, "stop"), w(fz=-9.0), False),
+    (Guard("fz_n", "<", -5.0, "stop"), w(fz=-9.0), True),
+    (Guard("fz_n", "abs>", 5.0, "stop"), w(fz=-9.0), True),
+    (Guard("force_n", ">", 5.0, "stop"), w(fz=3.0, fx=4.1), True),
+    (Guard("tz_nm", "abs>", 0.5, "retreat"), w(tz=0.4), False),
+])
+def test_guard_tripping(guard, reading, expected):
+    assert tripped(guard, reading) is expected
+
+
+def test_first_tripped_respects_order():
+    guards = (Guard("force_n", ">", 10.0, "retreat", "excess"),
+              Guard("force_n", ">", 1.0, "stop", "contact"))
+    assert first_tripped(w(fz=20.0), guards).name == "excess"
+    assert first_tripped(w(fz=2.0), guards).name == "contact"
+    assert first_tripped(ZERO, guards) is None
+
+
+class Surface:
+    """A wrench sensor whose force rises like a spring below a contact depth along +z."""
+
+    def __init__(self, arm, start_z, contact_depth_mm, k_n_per_mm=4.0):
+        self.arm, self.start_z, self.depth, self.k = arm, start_z, contact_depth_mm, k_n_per_mm
+
+    def __call__(self):
+        descended = self.start_z - self.arm._pose.z_mm  # tool points down: +dz lowers z
+        return w(fz=max(0.0, descended - self.depth) * self.k)
+
+
+def setup(contact_depth_mm, object_width_mm=30.0):
+    arm = FakeArm(object_width_mm=object_width_mm)
+    sensor = FakeWrenchSensor()
+    sensor._reading = Surface(arm, arm._pose.z_mm, contact_depth_mm)
+    for d in (arm, sensor):
+        d.connect()
+        d.activate()
+    return arm, sensor
+
+
+def test_grasp_succeeds_when_free_descent_reaches_depth():
+    arm, sensor = setup(contact_depth_mm=100.0)
+    start = arm.pose()
+    res = guarded_grasp(arm, sensor, 40.0, 30.0, GraspConfig())
+    assert res.success and res.depth_mm == pytest.approx(40.0)
+    assert arm.pose().z_mm == pytest.approx(start.z_mm - 40.0 + 30.0)  # lifted 30 mm
+
+
+def test_early_contact_retreats_to_start():
+    arm, sensor = setup(contact_depth_mm=10.0)
+    start = arm.pose()
+    res = guarded_grasp(arm, sensor, 40.0, 30.0, GraspConfig())
+    assert not res.success and res.retreated and "early contact" in res.reason
+    assert res.depth_mm < 20.0
+    assert arm.pose() == start and arm.finger_width_mm() == 40.0
+
+
+def test_contact_in_the_expected_zone_stops_and_grips():
+    arm, sensor = setup(contact_depth_mm=38.5)
+    res = guarded_grasp(arm, sensor, 40.0, 30.0, GraspConfig())
+    assert res.success and "contact" in res.reason and res.depth_mm == pytest.approx(40.0)
+
+
+def test_empty_grip_fails_the_width_check_and_retreats():
+    arm, sensor = setup(contact_depth_mm=100.0, object_width_mm=None)
+    start = arm.pose()
+    res = guarded_grasp(arm, sensor, 40.0, 30.0, GraspConfig())
+    assert not res.success and "grip check failed" in res.reason
+    assert arm.pose() == start
+
+
+class Held:
+    """A wrench sensor that feels ``weight_n`` along the approach axis once the arm has lifted
+    above its lowest point (the part hangs in the jaws)."""
+
+    def __init__(self, arm, weight_n):
+        self.arm, self.weight_n, self.lowest = arm, weight_n, arm._pose.z_mm
+
+    def __call__(self):
+        self.lowest = min(self.lowest, self.arm._pose.z_mm)
+        return w(fz=self.weight_n if self.arm._pose.z_mm > self.lowest + 1.0 else 0.0)
+
+
+@pytest.mark.parametrize("weight_n,min_n,success", [
+    (0.15, 0.0, True),     # check off
+    (0.15, 0.08, True),    # the part's weight is felt
+    (0.0, 0.08, False),    # jaws closed on nothing the width check could see (VAL)
+])
+def test_held_weight_check(weight_n, min_n, success):
+    arm, sensor = setup(contact_depth_mm=100.0)
+    sensor._reading = Held(arm, weight_n)
+    start = arm.pose()
+    res = guarded_grasp(arm, sensor, 40.0, 30.0, GraspConfig(min_held_weight_n=min_n))
+    assert res.success is success
+    assert res.held_weight_n == pytest.approx(weight_n)
+    if not success:
+        assert "N on the wrist" in res.reason and arm.pose() == start

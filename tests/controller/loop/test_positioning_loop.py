@@ -1,0 +1,103 @@
+"""Loop logic of the positioning controller against a fake arm and a scripted estimator."""
+
+import json
+
+import pytest
+
+from controller.loop.iteration_log import IterationLog, read_log
+from controller.loop.positioning import LoopConfig, PositioningLoop
+from drivers.core.pose import ToolStep
+from drivers.safety import SafetyLimits
+from tests.controller.loop.loop_fixtures import NOMINAL, TruthEstimator, truth_error
+from tests.mocks.fakes import FakeArm, FakeCamera
+
+
+def make(offset: ToolStep, limits=None, **cfg):
+    arm = FakeArm(limits, start=NOMINAL.moved_in_tool_frame(offset))
+    arm.connect()
+    arm.activate()
+    cam = FakeCamera()
+    cam.connect()
+    return arm, cam, LoopConfig(**cfg)
+
+
+def test_far_start_makes_half_loops_then_full_then_converges(tmp_path):
+    arm, cam, cfg = make(ToolStep(20.0, -15.0, 0.0, 20.0))
+    est = TruthEstimator(arm, gain=0.7)
+    with IterationLog(tmp_path / "it.jsonl") as log:
+        result = PositioningLoop(arm, cam, cfg, log, lambda: truth_error(arm)).run(est)
+    records = read_log(tmp_path / "it.jsonl")
+    kinds = [r["loop_kind"] for r in records]
+    # 25 mm is seen as 17.5 mm; the remaining 7.5 mm as 5.25 mm, still above r_fine
+    assert kinds[0] == "half" and kinds[1] == "half"
+    assert kinds[2] == "full" and kinds[-1] == "check"
+    assert result.outcome == "converged"
+    assert [s.loops for s in result.states][:4] == [0.0, 0.5, 1.0, 2.0]
+    ex, ey, ephi = result.states[-1].error
+    assert abs(ex) < 0.2 and abs(ey) < 0.2 and abs(ephi) < 1.0
+    for r in records[:-1]:
+        assert {"time", "run_id", "iteration", "loop_kind", "loops", "u_px", "v_px",
+                "commanded", "executed", "pose_after", "timings_ms", "error"} <= r.keys()
+    assert records[2]["nn2"] and records[2]["commanded"]["dphi_deg"] != 0
+    assert records[0]["commanded"]["dphi_deg"] == 0.0  # half loops do not rotate
+
+
+def test_near_start_goes_straight_to_full_loop():
+    arm, cam, cfg = make(ToolStep(1.0, 1.0, 0.0, 10.0))
+    result = PositioningLoop(arm, cam, cfg).run(TruthEstimator(arm))
+    assert result.outcome == "converged"
+    assert result.states[1].loops == 1.0  # first move was a full loop
+
+
+def test_r_fine_decides_the_loop_kind():
+    arm, cam, cfg = make(ToolStep(3.0, 0.0, 0.0, 10.0), r_fine_mm=2.0)
+    est = TruthEstimator(arm)
+    result = PositioningLoop(arm, cam, cfg).run(est)
+    assert result.states[1].loops == 0.5 and est.rotation_calls >= 1
+
+
+def test_budget_stops_the_loop_without_exceeding_it():
+    arm, cam, cfg = make(ToolStep(20.0, 0.0, 0.0, 30.0), max_loops=1.5)
+    result = PositioningLoop(arm, cam, cfg).run(TruthEstimator(arm, gain=0.5))
+    assert result.outcome == "budget"
+    assert result.loops <= 1.5
+
+
+@pytest.mark.parametrize("status", ["no_object", "ambiguous"])
+def test_no_object_stops_without_moving(status, tmp_path):
+    arm, cam, cfg = make(ToolStep(5.0, 0.0, 0.0, 0.0))
+    with IterationLog(tmp_path / "it.jsonl") as log:
+        result = PositioningLoop(arm, cam, cfg, log).run(TruthEstimator(arm, status=status))
+    assert result.outcome == status and "scripted" in result.reason
+    assert arm.moves == []
+    (record,) = read_log(tmp_path / "it.jsonl")
+    assert record["status"] == status and record["executed"] is None
+
+
+def test_safety_rejection_stops_the_loop():
+    limits = SafetyLimits(max_step_mm=5.0, on_violation="reject")
+    arm, cam, cfg = make(ToolStep(20.0, 0.0, 0.0, 0.0), limits=limits)
+    result = PositioningLoop(arm, cam, cfg).run(TruthEstimator(arm))
+    assert result.outcome == "rejected" and "max_step_mm" in result.reason
+    assert arm.moves == []
+
+
+def test_clipped_steps_are_logged_as_executed(tmp_path):
+    limits = SafetyLimits(max_step_mm=5.0, on_violation="clip")
+    arm, cam, cfg = make(ToolStep(-12.0, 0.0, 0.0, 0.0), limits=limits)
+    with IterationLog(tmp_path / "it.jsonl") as log:
+        result = PositioningLoop(arm, cam, cfg, log).run(TruthEstimator(arm))
+    assert result.outcome == "converged"
+    first = read_log(tmp_path / "it.jsonl")[0]
+    assert first["clipped"] is True
+    assert first["executed"]["dx_mm"] == pytest.approx(5.0, abs=1e-6)
+    assert first["commanded"]["dx_mm"] == pytest.approx(12.0, abs=1e-6)
+
+
+def test_log_lines_are_complete_json(tmp_path):
+    arm, cam, cfg = make(ToolStep(8.0, 3.0, 0.0, 5.0), save_images=True)
+    with IterationLog(tmp_path / "it.jsonl") as log:
+        PositioningLoop(arm, cam, cfg, log).run(TruthEstimator(arm))
+    lines = (tmp_path / "it.jsonl").read_text().splitlines()
+    assert lines and all(json.loads(line)["run_id"] for line in lines)
+    assert all((tmp_path / json.loads(line)["image"]).exists() for line in lines)

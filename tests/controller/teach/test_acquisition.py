@@ -1,0 +1,51 @@
+"""Acquisition around the nominal pose: grid order, step-limited transfer, exact labels."""
+
+import numpy as np
+import pytest
+
+from calibration_free.dataset import grid_offsets
+from controller.teach.acquisition import acquire, serpentine, transfer
+from drivers.core.pose import Pose, ToolStep
+from drivers.safety import SafetyLimits
+from tests.mocks.fakes import FakeArm, FakeCamera
+
+NOMINAL = Pose(300.0, 0.0, 150.0, -90.0, 90.0, 10.0)
+
+
+def active(device):
+    device.connect()
+    device.activate()
+    return device
+
+
+def test_serpentine_keeps_every_point_and_short_moves():
+    grid = grid_offsets(25.0, 45.0)
+    order = serpentine(grid)
+    assert sorted(map(tuple, order)) == sorted(map(tuple, grid))
+    jumps = np.abs(np.diff(order[:, :2], axis=0)).max(axis=1)
+    assert jumps.max() <= 25.0 + 1e-9  # never jumps across the whole grid
+
+
+def test_transfer_splits_long_moves_within_limits():
+    limits = SafetyLimits(max_step_mm=10.0, max_step_deg=20.0)
+    arm = active(FakeArm(limits, start=NOMINAL))
+    target = NOMINAL.moved_in_tool_frame(ToolStep(35.0, -12.0, 0.0, 70.0))
+    transfer(arm, target, limits.max_step_mm, limits.max_step_deg)
+    assert len(arm.moves) == 4
+    s = arm.pose().tool_step_to(target)
+    assert abs(s.dx_mm) < 1e-6 and abs(s.dy_mm) < 1e-6 and abs(s.dphi_deg) < 1e-6
+
+
+def test_labels_are_the_exact_step_back_to_nominal_even_with_tracking_error():
+    arm = active(FakeArm(start=NOMINAL))
+    arm.tracking_offset = ToolStep(0.3, -0.2, 0.0, 0.5)  # the arm misses every target a bit
+    cam = active(FakeCamera())
+    offsets = np.array([[5.0, -5.0, 10.0], [-5.0, 0.0, -20.0]])
+    data = acquire(arm, cam, NOMINAL, offsets, name="t", progress=False,
+                   ground_truth=lambda: (0.0, 0.0, 0.0))
+    assert data.images.shape == (2, 144, 192, 3) and len(data.samples) == 2
+    for (_, _, dphi), label, reached in zip(offsets, data.labels, arm.moves, strict=False):
+        back = reached.moved_in_tool_frame(ToolStep(*label[:2], 0.0, label[2]))
+        assert back.tool_step_to(NOMINAL).translation_mm == pytest.approx(0.0, abs=1e-9)
+        assert label[2] == pytest.approx(dphi - 0.5, abs=1e-9)
+    assert arm.moves[-1].tool_step_to(NOMINAL).translation_mm < 0.5  # back at nominal

@@ -1,0 +1,69 @@
+"""Strict config loading: unknown keys, wrong types and ranges fail with the key's path."""
+
+from dataclasses import dataclass, field
+from typing import Literal
+
+import pytest
+
+from drivers.core.errors import ConfigError
+from drivers.core.typed_config import from_mapping, load_yaml_file, to_mapping
+from drivers.safety import SafetyLimits
+
+
+@dataclass(frozen=True)
+class Inner:
+    kind: Literal["cube", "nut"] = "cube"
+    color: tuple[float, float, float] = field(default=(1.0, 0.85, 0.1),
+                                              metadata={"min": 0.0, "max": 1.0})
+
+
+@dataclass(frozen=True)
+class Outer:
+    inner: Inner = Inner()
+    count: int = field(default=0, metadata={"min": 0})
+    name: str | None = None
+    enabled: bool = False
+
+
+@pytest.mark.parametrize("data,message", [
+    ({"inner": {"kind": "sphere"}}, "scene.inner.kind: must be one of cube | nut"),
+    ({"inner": {"colour": [1, 1, 1]}}, "scene.inner.colour: unknown key"),
+    ({"inner": {"color": [1, 1]}}, "scene.inner.color: expected 3 values"),
+    ({"inner": {"color": [1, 2, 1]}}, "scene.inner.color: must be <= 1.0"),
+    ({"inner": {"color": "red"}}, "scene.inner.color: expected a list"),
+    ({"count": -1}, "scene.count: must be >= 0"),
+    ({"count": 1.5}, "scene.count: expected a whole number"),
+    ({"count": True}, "scene.count: expected a whole number"),
+    ({"enabled": "yes"}, "scene.enabled: expected true or false"),
+    ({"inner": [1]}, "scene.inner: expected a mapping"),
+])
+def test_bad_values_name_their_path(data, message):
+    with pytest.raises(ConfigError) as info:
+        from_mapping(Outer, data, "scene")
+    assert str(info.value).startswith(message)
+
+
+def test_good_values_load_and_round_trip():
+    cfg = from_mapping(Outer, {"inner": {"kind": "nut", "color": [0, 0.5, 1]}, "count": 3,
+                               "name": "x"}, "scene")
+    assert cfg.inner.color == (0.0, 0.5, 1.0) and cfg.count == 3
+    assert from_mapping(Outer, to_mapping(cfg), "scene") == cfg
+
+
+def test_cross_field_errors_carry_the_section_path():
+    with pytest.raises(ConfigError, match="safety"):
+        from_mapping(SafetyLimits, {"workspace_min_mm": [0, 0, 0],
+                                    "workspace_max_mm": [0, 1, 1]}, "safety")
+
+
+def test_yaml_file_errors(tmp_path):
+    bad = tmp_path / "bad.yaml"
+    bad.write_text("scene: [1, 2\n")
+    with pytest.raises(ConfigError, match="not valid YAML"):
+        load_yaml_file(bad)
+    lst = tmp_path / "list.yaml"
+    lst.write_text("- 1\n")
+    with pytest.raises(ConfigError, match="top level must be a mapping"):
+        load_yaml_file(lst)
+    with pytest.raises(ConfigError, match="cannot read"):
+        load_yaml_file(tmp_path / "missing.yaml")

@@ -1,0 +1,97 @@
+"""The scene section and the simulated arm's options: defaults, loading, clear errors."""
+
+from __future__ import annotations
+
+import typing
+
+import pytest
+
+from drivers.core.errors import ConfigError
+from drivers.core.typed_config import from_mapping
+from sim_backend.cell.lighting import PRESETS, resolve_light
+from sim_backend.cell.objects import PARTS
+from sim_backend.cell.scene_config import (
+    LightingConfig,
+    PartKind,
+    SceneConfig,
+    SimArmConfig,
+    load_scene,
+)
+
+ISSUE_EXAMPLE = """
+scene:
+  object: {kind: cube, color: [1.0, 0.85, 0.1]}
+  table: {color: [0.5, 0.5, 0.5], texture: none}
+  lighting: {preset: good}
+  occluder: {enabled: false, coverage: 0.0}
+  camera: {noise_std: 2.0}
+  clutter: {count: 0}
+"""
+
+
+def test_defaults_are_the_issue_example(tmp_path):
+    path = tmp_path / "finepos.yaml"
+    path.write_text(ISSUE_EXAMPLE)
+    assert load_scene(path) == SceneConfig()
+    scene = SceneConfig()
+    assert scene.object.kind == "cube" and scene.object.color == (1.0, 0.85, 0.1)
+    assert scene.table.texture == "none" and scene.lighting.preset == "good"
+    assert scene.camera.noise_std == 2.0 and scene.clutter.count == 0
+
+
+def test_load_scene_ignores_other_sections_and_missing_scene(tmp_path):
+    path = tmp_path / "finepos.yaml"
+    path.write_text("arm: {type: sim}\nperception: {whatever: 1}\n")
+    assert load_scene(path) == SceneConfig()
+    path.write_text("scene:\n  lighting: {preset: poor}\n  clutter: {count: 3}\n")
+    scene = load_scene(path)
+    assert scene.lighting.preset == "poor" and scene.clutter.count == 3
+
+
+@pytest.mark.parametrize("data, message", [
+    ({"object": {"size": 3}}, "scene.object.size: unknown key"),
+    ({"object": {"kind": "sphere"}}, "scene.object.kind: must be one of cube | nut"),
+    ({"object": {"color": [1, 0]}}, "scene.object.color: expected 3 values"),
+    ({"object": {"color": [1, 0, 2]}}, "scene.object.color: must be <= 1.0"),
+    ({"table": {"texture": "marble"}}, "scene.table.texture: must be one of none | wood"),
+    ({"lighting": {"preset": "bright"}}, "scene.lighting.preset: must be one of good"),
+    ({"lighting": {"ambient": -1}}, "scene.lighting.ambient: must be >= 0.0"),
+    ({"lighting": {"shadows": "yes"}}, "scene.lighting.shadows: expected true or false"),
+    ({"lighting": {"direction": [0, 0, -1]}}, "scene.lighting: direction: "),
+    ({"occluder": {"coverage": 1.5}}, "scene.occluder.coverage: must be <= 0.9"),
+    ({"camera": {"noise_std": "loud"}}, "scene.camera.noise_std: expected a number"),
+    ({"clutter": {"count": 2.5}}, "scene.clutter.count: expected a whole number"),
+    ({"clutter": {"count": 20}}, "scene.clutter.count: must be <= 8"),
+    ({"lights": {}}, "scene.lights: unknown key"),
+])
+def test_bad_scene_values_fail_with_the_key_path(data, message):
+    with pytest.raises(ConfigError) as err:
+        from_mapping(SceneConfig, data, "scene")
+    assert str(err.value).startswith(message), str(err.value)
+
+
+def test_load_scene_names_the_file(tmp_path):
+    path = tmp_path / "bad.yaml"
+    path.write_text("scene:\n  camera: {noise_std: -3}\n")
+    with pytest.raises(ConfigError, match=r"bad.yaml: scene.camera.noise_std: must be >= 0"):
+        load_scene(path)
+
+
+def test_part_kinds_match_the_registry():
+    assert set(typing.get_args(PartKind)) == set(PARTS)
+
+
+def test_sim_arm_config():
+    assert SimArmConfig().repeatability_mm == 0.02 and SimArmConfig().repeatability_deg == 0.02
+    with pytest.raises(ConfigError, match=r"^arm.contact_stiffness_n_per_mm: must be > 0"):
+        from_mapping(SimArmConfig, {"contact_stiffness_n_per_mm": 0}, "arm")
+    with pytest.raises(ConfigError, match=r"^arm.speed: unknown key"):
+        from_mapping(SimArmConfig, {"speed": 3}, "arm")
+
+
+def test_explicit_light_values_override_the_preset():
+    light = resolve_light(LightingConfig(preset="side", ambient=0.9, direction=(0, 0, 2)))
+    assert light.ambient == 0.9 and light.direction == (0.0, 0.0, 1.0)
+    assert light.diffuse == PRESETS["side"].diffuse
+    assert not resolve_light(LightingConfig(shadows=False)).casts_shadows
+    assert resolve_light(LightingConfig(preset="poor")).shadow_strength > 0.9
