@@ -20,11 +20,12 @@ import contextlib
 import functools
 import logging
 import threading
-from typing import Any
+from typing import Any, Self
 
 from sim_backend.cell.sim_cell import SimCell
 from sim_backend.devices import SimArm, SimCamera, SimWrenchSensor
 from sim_backend.emulators.ati.emulator import AtiEmulator
+from sim_backend.emulators.lifecycle import Lifecycle
 from sim_backend.emulators.mjpeg.server import MjpegServer
 from sim_backend.emulators.val.server import ValEmulator, ValFaults
 from sim_backend.emulators.val.sim_arm import SIM_KINEMATICS
@@ -56,7 +57,7 @@ class SerialisedCell:
         return locked
 
 
-class CellEmulators:
+class CellEmulators(Lifecycle):
     """Serves ``cell`` over the VAL emulator and, when asked, the ATI emulator and an MJPEG
     stream. Use as a context manager; the caller owns ``cell`` (close it after this).
 
@@ -124,7 +125,7 @@ class CellEmulators:
             sections["camera"] = {"type": "opencv", "source": self.stream_url}
         return sections
 
-    def start(self) -> CellEmulators:
+    def start(self) -> Self:
         """Connect the simulated devices and start every emulator asked for."""
         stack = self._stack
         try:
@@ -151,9 +152,3 @@ class CellEmulators:
         """Stop every emulator, in reverse order of starting (idempotent)."""
         self._stack.close()
         self.val = self.ati = self.mjpeg = None
-
-    def __enter__(self) -> CellEmulators:
-        return self.start()
-
-    def __exit__(self, *exc_info) -> None:
-        self.close()

@@ -1,4 +1,4 @@
-"""Where the VAL emulator listens: a raw pseudo-terminal or a TCP port on 127.0.0.1.
+"""Where a serial-device emulator listens: a raw pseudo-terminal or a TCP port on 127.0.0.1.
 
 Both give a ``url`` a client passes to ``serial.serial_for_url`` (the pty's ``/dev/pts/N``, or
 ``socket://127.0.0.1:PORT``), register their descriptors on the serving thread's selector with a

@@ -1,23 +1,24 @@
-"""The line a serial-device emulator serves (ATI F/T controller, Magellan mouse), and the
-threaded server both emulators are.
+"""The line a serial-device emulator serves (VAL II monitor, ATI F/T controller, Magellan
+mouse), and the threaded server every one of them is.
 
 ``EmulatorLink`` wraps an endpoint of ``sim_backend.emulators.endpoints`` (a raw pty whose
 slave the emulator keeps open, or a TCP port on 127.0.0.1) for one serving thread: ``read``
 waits on a selector with a timeout that other threads can cut short (``wake``: new work for the
 serving thread) or end for good (``interrupt``: stop serving), so an emulator reacts at once
-and stops deterministically. ``LinkServer`` owns the link and that thread.
+and stops deterministically. ``LinkServer`` (a ``ThreadedServer``) owns the link and that thread.
 """
 
 from __future__ import annotations
 
+import functools
 import logging
 import os
 import selectors
-import threading
-from abc import ABC, abstractmethod
-from typing import Self
+from abc import abstractmethod
+from collections.abc import Callable
 
 from sim_backend.emulators.endpoints import PtyEndpoint, TcpEndpoint
+from sim_backend.emulators.lifecycle import ThreadedServer
 
 logger = logging.getLogger(__name__)
 
@@ -85,19 +86,18 @@ class EmulatorLink:
         self.close()
 
 
-class LinkServer(ABC):
+class LinkServer(ThreadedServer):
     """An emulator serving one line from its own thread; use as a context manager.
 
     ``start()`` opens the line (a pty, or a TCP port on 127.0.0.1 when ``tcp_port`` is given)
     and runs ``_serve`` on a thread until ``close()``, which interrupts any pending read or
-    ``_stop`` wait, joins the thread and closes the line.
+    ``_closing`` wait, joins the thread and closes the line.
     """
 
     def __init__(self, tcp_port: int | None = None) -> None:
+        super().__init__()
         self._tcp_port = tcp_port
-        self._stop = threading.Event()
         self._link: EmulatorLink | None = None
-        self._thread: threading.Thread | None = None
 
     @property
     def url(self) -> str:
@@ -106,32 +106,20 @@ class LinkServer(ABC):
             raise RuntimeError(f"{type(self).__name__} is not started")
         return self._link.url
 
-    def start(self) -> Self:
+    def _open(self) -> dict[str, Callable[[], object]]:
         endpoint = PtyEndpoint() if self._tcp_port is None else TcpEndpoint(self._tcp_port)
         self._link = EmulatorLink(endpoint)
-        self._thread = threading.Thread(target=self._serve, args=(self._link,),
-                                        name=type(self).__name__, daemon=True)
-        self._thread.start()
         logger.info("%s on %s", type(self).__name__, self._link.url)
-        return self
+        return {"serve": functools.partial(self._serve, self._link)}
 
-    def close(self) -> None:
-        """Stop serving and close the line (idempotent)."""
-        if self._link is None:
-            return
-        self._stop.set()
+    def _interrupt(self) -> None:
+        assert self._link is not None
         self._link.interrupt()
-        assert self._thread is not None
-        self._thread.join()
+
+    def _release(self) -> None:
+        assert self._link is not None
         self._link.close()
         self._link = None
-        self._thread = None
-
-    def __enter__(self) -> Self:
-        return self.start()
-
-    def __exit__(self, *exc_info) -> None:
-        self.close()
 
     @abstractmethod
     def _serve(self, link: EmulatorLink) -> None:

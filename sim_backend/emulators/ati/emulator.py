@@ -110,7 +110,7 @@ class AtiEmulator(LinkServer):
             self._send(f"Error: {exc}".encode("ascii", "replace") + self.controller.eol + PROMPT)
 
     def _send(self, reply: bytes) -> None:
-        if self.faults.reply_delay_s > 0 and self._stop.wait(self.faults.reply_delay_s):
+        if self.faults.reply_delay_s > 0 and self._closing.wait(self.faults.reply_delay_s):
             return
         if self.faults.garbage:
             reply = bytes(self._rng.randrange(0x80, 0x100) for _ in reply[:-1]) + PROMPT

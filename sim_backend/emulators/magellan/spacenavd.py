@@ -18,8 +18,10 @@ import socket
 import subprocess
 import time
 from pathlib import Path
+from typing import Self
 
 from drivers.core.errors import DeviceNotConnectedError, DeviceTimeoutError
+from sim_backend.emulators.lifecycle import Lifecycle
 
 logger = logging.getLogger(__name__)
 
@@ -35,7 +37,7 @@ def find_spacenavd() -> str | None:
     return shutil.which("spacenavd", path=_SEARCH_PATH)
 
 
-class Spacenavd:
+class Spacenavd(Lifecycle):
     """One spacenavd process reading ``serial_path``; use as a context manager."""
 
     def __init__(self, serial_path: str, folder: str | Path, executable: str | None = None,
@@ -49,7 +51,7 @@ class Spacenavd:
         self.log_path = self.folder / "spacenavd.log"
         self._process: subprocess.Popen | None = None
 
-    def start(self) -> Spacenavd:
+    def start(self) -> Self:
         """Start the daemon and wait until its socket accepts clients."""
         if self.executable is None:
             raise DeviceNotConnectedError("spacenavd is not installed (Debian: apt-get install "
@@ -63,13 +65,13 @@ class Spacenavd:
         try:
             self._wait_for_socket()
         except BaseException:
-            self.stop()
+            self.close()
             raise
         logger.info("spacenavd (pid %d) serving %s on %s", self._process.pid,
                     self.serial_path, self.socket_path)
         return self
 
-    def stop(self) -> None:
+    def close(self) -> None:
         """Terminate the daemon and reap it (idempotent)."""
         if self._process is None:
             return
@@ -88,12 +90,6 @@ class Spacenavd:
             return "\n".join(self.log_path.read_text(errors="replace").splitlines()[-lines:])
         except FileNotFoundError:
             return "(no log)"
-
-    def __enter__(self) -> Spacenavd:
-        return self.start()
-
-    def __exit__(self, *exc_info) -> None:
-        self.stop()
 
     def _wait_for_socket(self) -> None:
         assert self._process is not None

@@ -18,8 +18,10 @@ with a network camera that hangs.
 
 from __future__ import annotations
 
+import functools
 import logging
 import threading
+from collections.abc import Callable
 from http import HTTPStatus
 from http.server import BaseHTTPRequestHandler, ThreadingHTTPServer
 from typing import Literal
@@ -28,6 +30,7 @@ import cv2
 
 from drivers.core.errors import FineposError
 from drivers.interfaces import Camera
+from sim_backend.emulators.lifecycle import ThreadedServer
 
 logger = logging.getLogger(__name__)
 
@@ -50,7 +53,7 @@ class _Server(ThreadingHTTPServer):
     daemon_threads = False
 
 
-class MjpegServer:
+class MjpegServer(ThreadedServer):
     """Serves ``camera`` on ``http://127.0.0.1:{port}``; use as a context manager."""
 
     def __init__(self, camera: Camera, port: int = 0, fps: float = 10.0,
@@ -61,6 +64,7 @@ class MjpegServer:
         at quality 95 matches raw frames within 0.05 mm."""
         if chroma not in _SAMPLING:
             raise ValueError(f"chroma must be 444 or 420, got {chroma!r}")
+        super().__init__()
         self.camera = camera
         self.fps = fps
         self.jpeg_quality = jpeg_quality
@@ -73,9 +77,7 @@ class MjpegServer:
         self._jpeg: bytes | None = None
         self._sequence = 0
         self._clients = 0
-        self._closing = False
         self._httpd: _Server | None = None
-        self._threads: list[threading.Thread] = []
 
     # -- addresses ------------------------------------------------------------------------
     @property
@@ -93,36 +95,23 @@ class MjpegServer:
         return f"http://127.0.0.1:{self.port}{SNAPSHOT_PATH}"
 
     # -- lifecycle ------------------------------------------------------------------------
-    def start(self) -> MjpegServer:
+    def _open(self) -> dict[str, Callable[[], object]]:
         self._httpd = _Server(("127.0.0.1", self._requested_port), _handler_class(self))
-        self._threads = [
-            threading.Thread(target=self._httpd.serve_forever, args=(_POLL_INTERVAL_S,),
-                             name="mjpeg-http"),
-            threading.Thread(target=self._grab_loop, name="mjpeg-grabber"),
-        ]
-        for thread in self._threads:
-            thread.start()
         logger.info("MJPEG stream on %s", self.stream_url)
-        return self
+        return {"http": functools.partial(self._httpd.serve_forever, _POLL_INTERVAL_S),
+                "grabber": self._grab_loop}
 
-    def close(self) -> None:
-        """Stop serving: end every stream, join all threads, close the socket (idempotent)."""
-        if self._httpd is None:
-            return
+    def _interrupt(self) -> None:
+        """End every stream and the grabber, and stop accepting."""
         with self._frame_changed:
-            self._closing = True
             self._frame_changed.notify_all()
+        assert self._httpd is not None
         self._httpd.shutdown()
-        for thread in self._threads:
-            thread.join()
+
+    def _release(self) -> None:
+        assert self._httpd is not None
         self._httpd.server_close()  # joins the request threads
         self._httpd = None
-
-    def __enter__(self) -> MjpegServer:
-        return self.start()
-
-    def __exit__(self, *exc_info) -> None:
-        self.close()
 
     # -- frames ---------------------------------------------------------------------------
     def grab_jpeg(self) -> bytes:
@@ -145,8 +134,8 @@ class MjpegServer:
         period_s = 1.0 / self.fps
         while True:
             with self._frame_changed:
-                self._frame_changed.wait_for(lambda: self._closing or self._clients > 0)
-                if self._closing:
+                self._frame_changed.wait_for(lambda: self._closing.is_set() or self._clients > 0)
+                if self._closing.is_set():
                     return
             if not self.paused.is_set():
                 try:
@@ -159,15 +148,15 @@ class MjpegServer:
                         self._sequence += 1
                         self._frame_changed.notify_all()
             with self._frame_changed:
-                if self._frame_changed.wait_for(lambda: self._closing, period_s):
+                if self._frame_changed.wait_for(self._closing.is_set, period_s):
                     return
 
     def _next_jpeg(self, after_sequence: int) -> tuple[int, bytes] | None:
         """Block until a frame newer than ``after_sequence``; None when the server closes."""
         with self._frame_changed:
             self._frame_changed.wait_for(
-                lambda: self._closing or self._sequence > after_sequence)
-            if self._closing:
+                lambda: self._closing.is_set() or self._sequence > after_sequence)
+            if self._closing.is_set():
                 return None
             assert self._jpeg is not None
             return self._sequence, self._jpeg

@@ -2,21 +2,21 @@
 knobs.
 
 ``with ValEmulator(arm) as emulator:`` starts serving and prints nothing; ``emulator.url`` is what
-a client (the VAL driver's ``port``) opens. Leaving the block stops the thread deterministically
-(a wake-up pipe interrupts the selector and any reply delay) and closes the endpoint. The arm is
-the caller's: connect and activate it before, disconnect it after.
+a client (the VAL driver's ``port``) opens. Leaving the block (or ``close()``) stops the thread
+deterministically (``LinkServer``: the link's wake-up pipe interrupts the read, and any reply
+delay ends) and closes the line. The arm is the caller's: connect and activate it before,
+disconnect it after.
 """
 
 from __future__ import annotations
 
 import logging
-import os
-import selectors
 import threading
+from collections.abc import Callable
 from dataclasses import dataclass
 
 from drivers.interfaces import Arm
-from sim_backend.emulators.endpoints import PtyEndpoint, TcpEndpoint
+from sim_backend.emulators.link import EmulatorLink, LinkServer
 from sim_backend.emulators.val.kinematics import Puma260
 from sim_backend.emulators.val.lines import LineAssembler
 from sim_backend.emulators.val.monitor import ValMonitor
@@ -52,30 +52,22 @@ class ValFaults:
                              f"{self.drop_link_after_lines}")
 
 
-class ValEmulator:
+class ValEmulator(LinkServer):
     """Serves the VAL II monitor for ``arm`` on a new pty, or on ``tcp_port`` (0: any free port).
 
-    lines_handled: input lines answered since start (logged at stop).
+    lines_handled: input lines answered since start (logged at close).
     """
 
     def __init__(self, arm: Arm, *, tcp_port: int | None = None, boot_questions: bool = False,
                  kinematics: Puma260 | None = None, faults: ValFaults | None = None) -> None:
+        super().__init__(tcp_port)
         self._monitor = ValMonitor(arm, kinematics, boot_questions)
-        self._endpoint = PtyEndpoint() if tcp_port is None else TcpEndpoint(tcp_port)
         self._faults = faults or ValFaults()
         self._lines_since_faults = 0
         self._link_down = False
         self._assembler = LineAssembler()
         self._changed = threading.Condition()
-        self._stopping = False
-        self._wake_r, self._wake_w = os.pipe()
-        self._thread = threading.Thread(target=self._serve, name="val-emulator", daemon=True)
         self.lines_handled = 0
-
-    @property
-    def url(self) -> str:
-        """The port URL for ``serial.serial_for_url`` (a pty path or ``socket://...``)."""
-        return self._endpoint.url
 
     def set_faults(self, faults: ValFaults) -> None:
         """Replace the fault knobs; restores a dropped link and ends a pending reply delay."""
@@ -86,51 +78,32 @@ class ValEmulator:
             self._changed.notify_all()
         logger.info("VAL emulator faults: %s", faults)
 
-    def start(self) -> None:
-        """Print what the controller prints at power-up (a pty keeps it for the first client),
-        then serve from the background thread."""
-        self._endpoint.write(self._monitor.first_output())
-        self._thread.start()
-        logger.info("VAL emulator serving on %s", self.url)
+    def _open(self) -> dict[str, Callable[[], object]]:
+        """Open the line and print what the controller prints at power-up (a pty keeps it for
+        the first client) before the serving thread starts."""
+        bodies = super()._open()
+        assert self._link is not None
+        self._link.write(self._monitor.first_output())
+        return bodies
 
-    def stop(self) -> None:
-        """Stop serving and close the endpoint; idempotent."""
-        with self._changed:
-            if self._stopping:
-                return
-            self._stopping = True
+    def _interrupt(self) -> None:
+        with self._changed:  # ends a pending reply delay
             self._changed.notify_all()
-        os.write(self._wake_w, b"x")
-        if self._thread.is_alive():
-            self._thread.join()
-        self._endpoint.close()
-        os.close(self._wake_r)
-        os.close(self._wake_w)
-        logger.info("VAL emulator stopped after %d lines", self.lines_handled)
+        super()._interrupt()
 
-    def __enter__(self) -> ValEmulator:
-        self.start()
-        return self
-
-    def __exit__(self, *exc_info) -> None:
-        self.stop()
+    def _release(self) -> None:
+        super()._release()
+        logger.info("VAL emulator closed after %d lines", self.lines_handled)
 
     # -- serving thread ----------------------------------------------------------------------
-    def _serve(self) -> None:
-        with selectors.DefaultSelector() as selector:
-            selector.register(self._wake_r, selectors.EVENT_READ, None)
-            self._endpoint.register(selector)
-            while not self._stopping:
-                for key, _ in selector.select():
-                    if key.data is None or self._stopping:
-                        break
-                    data = key.data()
-                    if data:
-                        self._handle(data)
+    def _serve(self, link: EmulatorLink) -> None:
+        while (data := link.read(None)) is not None:
+            if data:
+                self._handle(link, data)
 
-    def _handle(self, data: bytes) -> None:
+    def _handle(self, link: EmulatorLink, data: bytes) -> None:
         if self._link_down:
-            self._endpoint.hang_up()
+            link.hang_up()
             return
         for line in self._assembler.feed(data):
             with self._changed:
@@ -141,15 +114,16 @@ class ValEmulator:
             if self._link_down:
                 logger.info("VAL emulator: link dropped after %d lines", self._lines_since_faults)
                 self._assembler = LineAssembler()
-                self._endpoint.hang_up()
+                link.hang_up()
                 return
             response = self._monitor.handle_line(line, faults.forced_error)
-            self._endpoint.write(response.echo)
+            link.write(response.echo)
             if faults.reply_delay_s > 0:
                 with self._changed:
-                    self._changed.wait_for(lambda f=faults: self._stopping or self._faults is not f,
-                                           timeout=faults.reply_delay_s)
+                    self._changed.wait_for(
+                        lambda f=faults: self._closing.is_set() or self._faults is not f,
+                        timeout=faults.reply_delay_s)
             with self._changed:  # counted before the reply leaves, so a client sees it
                 self._lines_since_faults += 1
                 self.lines_handled += 1
-            self._endpoint.write(faults.garbage + response.reply)
+            link.write(faults.garbage + response.reply)
