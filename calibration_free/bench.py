@@ -19,7 +19,7 @@ from __future__ import annotations
 
 import argparse
 import contextlib
-import json
+import dataclasses
 import os
 import platform
 import time
@@ -33,10 +33,11 @@ from threadpoolctl import threadpool_limits
 from calibration_free import angles
 from calibration_free.dataset import grid_offsets, random_offsets
 from calibration_free.filter2d_reference import Filter2DFeatures
-from calibration_free.pipeline import Percept, Perception, train_bundle
+from calibration_free.perception import Percept, Perception
 from calibration_free.synthetic import SyntheticCell, render, render_dataset
+from calibration_free.training import train_bundle
 from drivers.core.errors import ConfigError, FineposError
-from drivers.core.files import atomic_write_text
+from drivers.core.files import write_json
 
 KAPPA = 4
 NN1_A_MM = 25.0
@@ -115,7 +116,9 @@ def measure(n_frames: int, n_opencv_frames: int, seed: int) -> dict:
     labels = random_offsets(rng, n_frames, NN2_A_MM, b_deg)
     frames = np.stack([render(cell, label, rng) for label in labels])
     perception = Perception(bundle)
-    percepts = [perception.perceive(frame) for frame in frames]
+    # Kept for the error and stage figures, without the frame each percept carries along.
+    percepts = [dataclasses.replace(perception.perceive(frame), normalised=None)
+                for frame in frames]
     missed = sum(not p.ok for p in percepts)
     if missed:
         raise FineposError(f"the object was not found in {missed} of {n_frames} synthetic "
@@ -143,7 +146,7 @@ def measure(n_frames: int, n_opencv_frames: int, seed: int) -> dict:
         "opencv_median_us": opencv_median,
         "opencv_p99_us": float(np.percentile(opencv_us, 99)),
         "speedup": opencv_median / median,
-        "channel": bundle.channel,
+        "channel": bundle.front.channel,
         "frames": n_frames,
         "opencv_frames": n_opencv_frames,
         "frame_shape": list(frames.shape[1:]),
@@ -170,7 +173,5 @@ def run(args: argparse.Namespace) -> int:
         result = measure(args.frames, min(args.opencv_frames, args.frames), args.seed)
     result.update(cpu=cpu, machine=platform.machine(), python=platform.python_version(),
                   numpy=np.__version__, opencv=cv2.__version__, torch=torch.__version__)
-    text = json.dumps(result, indent=2)
-    print(text)
-    atomic_write_text(args.json, text + "\n")
+    write_json(args.json, result)
     return 0

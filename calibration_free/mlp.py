@@ -122,6 +122,31 @@ class NumpyMLP:
                    arrays[f"{prefix}.y_mean"], arrays[f"{prefix}.y_std"])
 
 
+def training_pairs(x: np.ndarray, y: np.ndarray, learner: str) \
+        -> tuple[np.ndarray, np.ndarray]:
+    """Check a learner's training data (the MLPs', the PCA system's fuzzy controller's).
+
+    Args:
+        x: (N, n_in) inputs.
+        y: (N, n_out) targets.
+        learner: named in the error messages, e.g. "mlp" or "fuzzy controller".
+
+    Returns:
+        x and y as float64 arrays.
+
+    Raises:
+        TrainingError: not 2-D, different N, fewer than two samples, or not finite.
+    """
+    x = np.asarray(x, dtype=np.float64)
+    y = np.asarray(y, dtype=np.float64)
+    if x.ndim != 2 or y.ndim != 2 or x.shape[0] != y.shape[0] or x.shape[0] < 2:
+        raise TrainingError(f"{learner}: need (N, n_in) inputs and (N, n_out) targets with "
+                            f"N >= 2, got {x.shape} and {y.shape}")
+    if not (np.isfinite(x).all() and np.isfinite(y).all()):
+        raise TrainingError(f"{learner}: training inputs and targets must be finite")
+    return x, y
+
+
 @dataclass(frozen=True)
 class TrainedMLP:
     """Result of ``train_mlp``.
@@ -170,13 +195,7 @@ def train_mlp(x: np.ndarray, y: np.ndarray, hidden: tuple[int, ...], *, seed: in
             hidden size below 1, or a negative weight_decay.
     """
     start = time.perf_counter()
-    x = np.asarray(x, dtype=np.float64)
-    y = np.asarray(y, dtype=np.float64)
-    if x.ndim != 2 or y.ndim != 2 or x.shape[0] != y.shape[0] or x.shape[0] < 2:
-        raise TrainingError(f"need (N, n_in) inputs and (N, n_out) targets with N >= 2, got "
-                            f"{x.shape} and {y.shape}")
-    if not (np.isfinite(x).all() and np.isfinite(y).all()):
-        raise TrainingError("training inputs and targets must be finite")
+    x, y = training_pairs(x, y, "mlp")
     if sample_weight is not None:
         sample_weight = np.asarray(sample_weight, dtype=np.float64)
         if sample_weight.shape != (x.shape[0],) or not (np.isfinite(sample_weight).all()

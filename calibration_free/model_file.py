@@ -5,6 +5,10 @@ metadata (``finepos_model``), together with ``sha256``, a digest of that JSON an
 array that catches corruption safetensors' own size checks miss. The JSON names the format,
 the system (``kind``: ``gabor``, ``pca`` or ``hough``) and that system's format version, so a
 file of another system or version is refused with a message saying so. Writes are atomic.
+
+``TaughtModel`` is the save/load every system's model shares: the JSON says what was taught
+(``object_kind``, ``kappa``, ``nominal_pose``), the front end (``FrontEnd.to_info``), the
+system's own settings and the training metadata; the system adds its arrays.
 """
 
 from __future__ import annotations
@@ -12,14 +16,18 @@ from __future__ import annotations
 import hashlib
 import json
 import math
+from abc import ABC, abstractmethod
+from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any
+from typing import Any, ClassVar, Self
 
 import numpy as np
 import safetensors.numpy
 from safetensors import SafetensorError
 
 from calibration_free.errors import BundleError
+from calibration_free.front_end import FrontEnd
+from drivers.core.errors import FineposError
 from drivers.core.files import atomic_write_bytes
 
 FORMAT = "finepos-model"
@@ -136,3 +144,108 @@ def check_taught_object(path: str | Path, kind: str, taught: str, expected: str 
     if expected is not None and taught != expected:
         raise BundleError(f"{path}: this {kind} model was taught on object {taught!r}, "
                           f"not {expected!r}")
+
+
+@dataclass(frozen=True, eq=False)
+class TaughtModel(ABC):
+    """A system's trained model of one part, saved to and loaded from one model file.
+
+    Subclasses are frozen dataclasses that add their system's fields, set ``file_kind`` and
+    ``file_version``, and implement ``system_info``, ``arrays`` and ``from_file``.
+
+    Attributes:
+        file_kind: (class) the system's name in the file (``gabor``, ``pca``, ``hough``).
+        file_version: (class) that system's model format version (others are refused).
+        object_kind: what was taught, e.g. "cube"; checked by ``load(expect_object=...)``.
+        kappa: rotational symmetry count of the object (4 for the cube).
+        nominal_pose: the taught pose, {x_mm, y_mm, z_mm, o_deg, a_deg, t_deg}.
+        front: the preprocessing and localisation as trained.
+        training: JSON-able training metadata (keyword-only).
+    """
+
+    file_kind: ClassVar[str]
+    file_version: ClassVar[int]
+    object_kind: str
+    kappa: int
+    nominal_pose: dict[str, float]
+    front: FrontEnd
+    training: dict[str, Any] = field(default_factory=dict, kw_only=True)
+
+    @abstractmethod
+    def system_info(self) -> dict[str, Any]:
+        """The system's own JSON metadata (settings; no keys of ``to_info``'s shared part).
+
+        Returns:
+            A JSON-able dict merged into the file's JSON.
+        """
+
+    @abstractmethod
+    def arrays(self) -> dict[str, np.ndarray]:
+        """The model's numeric arrays, by the names the file stores them under.
+
+        Returns:
+            Named arrays (the file's safetensors tensors).
+        """
+
+    @classmethod
+    @abstractmethod
+    def from_file(cls, info: dict[str, Any], arrays: dict[str, np.ndarray],
+                  taught: dict[str, Any]) -> Self:
+        """Build the model from what ``read_model`` returned.
+
+        Args:
+            info: the file's JSON.
+            arrays: the file's arrays.
+            taught: constructor arguments read from the shared part of ``info``:
+                ``object_kind``, ``kappa``, ``nominal_pose``, ``front``, ``training``.
+
+        Raises:
+            KeyError, TypeError, ValueError, AttributeError, FineposError: missing or
+                inconsistent contents (``load`` turns them into a BundleError).
+        """
+
+    def to_info(self) -> dict[str, Any]:
+        """The file's JSON: what was taught, the front end, ``system_info``, the training.
+
+        Returns:
+            A JSON-able dict (without "format", "kind", "format_version": ``write_model``
+            adds them).
+        """
+        return {"object_kind": self.object_kind, "kappa": self.kappa,
+                "nominal_pose": self.nominal_pose, **self.front.to_info(),
+                **self.system_info(), "training": self.training}
+
+    def save(self, path: str | Path) -> None:
+        """Write the model to ``path`` atomically (a reader sees the old or the new file).
+
+        Args:
+            path: destination.
+
+        Raises:
+            BundleError: the metadata (e.g. the training's) is not JSON-serialisable.
+        """
+        write_model(path, self.file_kind, self.file_version, self.to_info(), self.arrays())
+
+    @classmethod
+    def load(cls, path: str | Path, expect_object: str | None = None) -> Self:
+        """Read a model written by ``save``; never modifies anything.
+
+        Args:
+            path: the model file.
+            expect_object: if given, the object kind the model must have been taught on.
+
+        Raises:
+            BundleError: the file is missing, corrupt, truncated, of another system or
+                format version, inconsistent, or taught on another object than
+                ``expect_object``.
+        """
+        info, arrays = read_model(path, cls.file_kind, cls.file_version)
+        try:
+            taught = {"object_kind": str(info["object_kind"]), "kappa": info["kappa"],
+                      "nominal_pose": nominal_pose_of(info), "front": FrontEnd.from_info(info),
+                      "training": info.get("training", {})}
+            model = cls.from_file(info, arrays, taught)
+        except (KeyError, TypeError, ValueError, AttributeError, FineposError) as exc:
+            raise BundleError(f"{path}: inconsistent {cls.file_kind} model: {exc}") from exc
+        check_taught_object(path, cls.file_kind, model.object_kind, expect_object)
+        return model

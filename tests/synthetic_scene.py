@@ -25,3 +25,9 @@ def grids(cell) -> tuple[Dataset, Dataset]:
     rng = np.random.default_rng(1)
     return (render_dataset(cell, grid_offsets(25.0, 180.0 / KAPPA), rng),
             render_dataset(cell, grid_offsets(5.0, 180.0 / KAPPA), rng))
+
+
+def wrapped_error_deg(estimate: np.ndarray, truth: np.ndarray) -> np.ndarray:
+    """Rotation errors folded into the symmetry period (-180/kappa, 180/kappa]."""
+    half = 180.0 / KAPPA
+    return (np.asarray(estimate) - np.asarray(truth) + half) % (2 * half) - half

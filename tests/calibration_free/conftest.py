@@ -5,7 +5,7 @@ from __future__ import annotations
 import pytest
 
 from calibration_free.bundle import ModelBundle
-from calibration_free.pipeline import train_bundle
+from calibration_free.training import train_bundle
 from tests.synthetic_scene import KAPPA, NOMINAL_POSE  # noqa: F401  (re-exported)
 
 

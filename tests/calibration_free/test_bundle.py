@@ -12,8 +12,9 @@ from calibration_free.bundle import FORMAT_VERSION, KIND, ModelBundle
 from calibration_free.errors import BundleError
 from calibration_free.gabor import GaborConfig
 from calibration_free.model_file import pack_model
-from calibration_free.pipeline import Perception
+from calibration_free.perception import Perception
 from calibration_free.synthetic import render
+from drivers.core.typed_config import to_mapping
 
 from .conftest import KAPPA, NOMINAL_POSE
 
@@ -41,7 +42,7 @@ def test_round_trip_keeps_everything(bundle, cell, tmp_path):
 
 
 def info_and_tensors(bundle: ModelBundle) -> tuple[dict, dict]:
-    return bundle._info(), bundle.arrays()
+    return bundle.to_info(), bundle.arrays()
 
 
 def pack(info: dict, tensors: dict, version: int = FORMAT_VERSION) -> bytes:
@@ -84,6 +85,43 @@ def test_corrupt_or_truncated_bundles_are_refused_and_nothing_changes(bundle, tm
         assert path.read_bytes() == data, name
     assert good_path.read_bytes() == good
     assert ModelBundle.load(good_path).object_kind == "cube"
+
+
+def version_4_info(bundle: ModelBundle) -> dict:
+    """The JSON of a version-4 bundle as finepos wrote it when the bundle kept its front end
+    as flat fields: every key spelled out here, not taken from the code under test."""
+    f = bundle.front
+    return {
+        "object_kind": "cube",
+        "kappa": KAPPA,
+        "nominal_pose": dict(NOMINAL_POSE),
+        "frame_px": {"height": 144, "width": 192},
+        "intensity": {"mean": f.intensity.mean, "std": f.intensity.std},
+        "localisation": {"threshold": f.threshold, "polarity": "bright",
+                         "expected_area_px": f.expected_area_px,
+                         "area_tolerance": f.area_tolerance,
+                         "max_elongation": f.max_elongation, "channel": "max",
+                         "nominal_uv_px": [f.nominal_uv_px[0], f.nominal_uv_px[1]]},
+        "gabor": to_mapping(bundle.gabor),
+        "training": {"seed": 0},
+    }
+
+
+def test_a_file_in_the_version_4_layout_loads_and_is_still_written(bundle, cell, tmp_path):
+    path = tmp_path / "v4.bundle"
+    path.write_bytes(pack(version_4_info(bundle), bundle.arrays(), version=4))
+    old = ModelBundle.load(path, expect_object="cube")
+    assert old.front == bundle.front and old.training == {"seed": 0}
+    frame = render(cell, np.array([-1.5, 2.0, 8.0]), np.random.default_rng(2))
+    p, q = Perception(bundle).perceive(frame), Perception(old).perceive(frame)
+    assert (p.nn1_mm, p.full_mm, p.nn2_sc, p.dphi_deg) == (q.nn1_mm, q.full_mm, q.nn2_sc,
+                                                            q.dphi_deg)
+    written = bundle.to_info()  # and saving writes the same layout
+    expected = version_4_info(bundle)
+    assert sorted(written) == sorted(expected)
+    assert written["localisation"] == expected["localisation"]
+    assert written["frame_px"] == expected["frame_px"]
+    assert written["intensity"] == expected["intensity"]
 
 
 def test_checksum_catches_a_single_changed_weight(bundle, tmp_path):

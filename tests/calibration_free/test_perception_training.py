@@ -8,9 +8,9 @@ import pytest
 from calibration_free.angles import decode, encode
 from calibration_free.dataset import Dataset, random_offsets
 from calibration_free.errors import ImageError, TrainingError
-from calibration_free.pipeline import Perception, train_bundle
+from calibration_free.perception import Perception
 from calibration_free.synthetic import render, render_at
-from drivers.core.pose import ToolStep
+from calibration_free.training import train_bundle
 
 from .conftest import KAPPA, NOMINAL_POSE
 
@@ -37,7 +37,7 @@ def test_training_records_what_it_did(bundle):
         assert t[net]["seconds"] > 0
     assert t["seconds"] >= t["nn1"]["seconds"] + t["nn2"]["seconds"]
     assert bundle.object_kind == "cube" and bundle.nominal_pose == NOMINAL_POSE
-    assert 700 < bundle.expected_area_px < 950  # a 30 px rounded square minus its hole
+    assert 700 < bundle.front.expected_area_px < 950  # a 30 px rounded square minus its hole
 
 
 def test_perception_corrects_random_poses_near_the_nominal(bundle, cell):
@@ -63,7 +63,7 @@ def test_translation_over_nn1s_range(bundle, cell):
     assert (np.sqrt(np.mean(np.square(err), axis=0)) < 1.5).all()
 
 
-def test_percept_carries_stages_and_a_tool_step(bundle, cell):
+def test_percept_carries_stages_and_the_full_loops_step(bundle, cell):
     frame = render(cell, np.array([1.5, -2.0, 20.0]), np.random.default_rng(9))
     perception = Perception(bundle)
     p = perception.perceive(frame)
@@ -71,12 +71,13 @@ def test_percept_carries_stages_and_a_tool_step(bundle, cell):
                                  "total"}
     assert all(v >= 0 for v in p.timings_us.values())
     assert p.features.shape == (36,) and p.u_px == p.localisation.u_px
-    step = p.tool_step()  # the full loop's: translation from (u, v) and NN2's rotation
-    assert (step.dx_mm, step.dy_mm, step.dz_mm, step.dphi_deg) == (*p.full_mm, 0.0, p.dphi_deg)
+    # the full loop's translation: from (u, v) and NN2's rotation
     assert np.allclose(p.full_mm, (1.5, -2.0), atol=0.5)
     half = perception.translation(frame)
     assert half.nn1_mm == p.nn1_mm and half.full_mm is None
-    assert half.tool_step() == ToolStep(*p.nn1_mm)
+    again = perception.rotation(half)  # goes on from the same pass: the same numbers
+    assert again.full_mm == p.full_mm and again.dphi_deg == p.dphi_deg
+    assert np.array_equal(again.features, p.features)
     normalised, loc = perception.locate(frame)
     assert normalised.dtype == np.float32 and loc == p.localisation
 
@@ -90,7 +91,7 @@ def test_no_object_and_ambiguous_carry_no_motion(bundle, cell):
         p = perception.perceive(frame)
         assert p.localisation.status == status and not p.ok
         assert p.nn1_mm is None and p.features is None and p.dphi_deg is None
-        assert p.tool_step() is None
+        assert p.full_mm is None
 
 
 def test_perception_ignores_gain_and_offset(bundle, cell):
@@ -141,7 +142,7 @@ def test_training_refuses_unusable_data(grids):
 
 
 def test_auto_picks_saturation_for_a_coloured_part_on_grey(saturation_bundle, bundle):
-    assert saturation_bundle.channel == "saturation" and bundle.channel == "max"
+    assert saturation_bundle.front.channel == "saturation" and bundle.front.channel == "max"
 
 
 def test_saturation_path_ignores_gain_and_shade(saturation_bundle, cell):
@@ -167,7 +168,7 @@ def test_nn1_reads_zero_at_the_taught_pose(bundle, saturation_bundle, cell):
 def test_clearly_nearest_of_two_matching_blobs_is_taken(bundle, cell):
     """Two identical parts: the one near the taught image position is the part, unless
     both are about as near (then: ambiguous)."""
-    u0, v0 = bundle.nominal_uv_px
+    u0, v0 = bundle.front.nominal_uv_px
     near_far = np.maximum(render_at(cell, u0 + 3.0, v0, 0.0), render_at(cell, u0 + 70.0, v0,
                                                                         30.0))
     p = Perception(bundle).perceive(near_far)

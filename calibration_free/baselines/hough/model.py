@@ -14,8 +14,7 @@ File: ``model_file`` with kind "hough"; arrays ``psom.weights``, ``psom.nodes{k}
 from __future__ import annotations
 
 from dataclasses import asdict, dataclass, field
-from pathlib import Path
-from typing import Any
+from typing import Any, ClassVar
 
 import numpy as np
 
@@ -29,16 +28,10 @@ from calibration_free.baselines.hough.constellation import (
 )
 from calibration_free.baselines.hough.psom import PSOM
 from calibration_free.baselines.hough.transform import HoughLine
-from calibration_free.errors import BundleError
 from calibration_free.front_end import FrontEnd
 from calibration_free.localise import Localisation, Status
-from calibration_free.model_file import (
-    check_taught_object,
-    nominal_pose_of,
-    read_model,
-    write_model,
-)
-from drivers.core.errors import ConfigError, FineposError
+from calibration_free.model_file import TaughtModel
+from drivers.core.errors import ConfigError
 from drivers.core.typed_config import from_mapping, to_mapping
 
 KIND = "hough"
@@ -168,7 +161,7 @@ class HoughPercept:
 
 
 @dataclass(frozen=True, eq=False)
-class HoughModel:
+class HoughModel(TaughtModel):
     """A trained Hough system for one part.
 
     Attributes:
@@ -183,16 +176,14 @@ class HoughModel:
         training: JSON-able training metadata.
     """
 
-    object_kind: str
-    kappa: int
-    nominal_pose: dict[str, float]
-    front: FrontEnd
+    file_kind: ClassVar[str] = KIND
+    file_version: ClassVar[int] = FORMAT_VERSION
+
     config: HoughConfig
     edge_settings: EdgeSettings
     constellation: ConstellationModel
     angle_map: AngleMap
     psom: PSOM
-    training: dict[str, Any] = field(default_factory=dict)
 
     def __post_init__(self) -> None:
         if not (self.constellation.kappa == self.angle_map.kappa == self.kappa):
@@ -214,8 +205,7 @@ class HoughModel:
         Raises:
             ImageError: the frame is not HxWx3 uint8 of the training frames' size.
         """
-        normalised = self.front.normalise(image)
-        loc = self.front.localise(normalised)
+        normalised, loc = self.front.locate(image)
         if not loc.ok:
             return HoughPercept(loc.status, loc.reason, loc)
         outline = find_outline(normalised, self.front, loc, self.config, self.edge_settings,
@@ -229,49 +219,38 @@ class HoughModel:
         return HoughPercept("ok", "", loc, outline, found, dphi,
                             (float(w[PSOM_OUTPUTS[0]]), float(w[PSOM_OUTPUTS[1]])), s)
 
-    def save(self, path: str | Path) -> None:
-        """Write the model atomically.
+    def system_info(self) -> dict[str, Any]:
+        """The Hough system's own JSON: config, edge settings, constellation model, the angle
+        map's and the PSOM's shapes.
 
-        Raises:
-            BundleError: the training metadata is not JSON-serialisable.
+        Returns:
+            A JSON-able dict, merged into the file's JSON by ``to_info``.
         """
-        info = {"object_kind": self.object_kind, "kappa": self.kappa,
-                "nominal_pose": self.nominal_pose, **self.front.to_info(),
-                "hough": to_mapping(self.config), "edge_settings": asdict(self.edge_settings),
+        return {"hough": to_mapping(self.config), "edge_settings": asdict(self.edge_settings),
                 "constellation": asdict(self.constellation),
                 "angle_map": {"harmonics": self.angle_map.harmonics},
-                "psom": {"inputs": list(self.psom.inputs), "axes": len(self.psom.nodes)},
-                "training": self.training}
-        arrays = {"psom.weights": self.psom.weights, "psom.scale": self.psom.scale,
-                  "angle_map.coefficients": self.angle_map.coefficients,
-                  **{f"psom.nodes{k}": n for k, n in enumerate(self.psom.nodes)}}
-        write_model(path, KIND, FORMAT_VERSION, info, arrays)
+                "psom": {"inputs": list(self.psom.inputs), "axes": len(self.psom.nodes)}}
+
+    def arrays(self) -> dict[str, np.ndarray]:
+        """The PSOM and the angle map as named arrays.
+
+        Returns:
+            ``psom.weights``, ``psom.scale``, ``angle_map.coefficients``, ``psom.nodes{k}``.
+        """
+        return {"psom.weights": self.psom.weights, "psom.scale": self.psom.scale,
+                "angle_map.coefficients": self.angle_map.coefficients,
+                **{f"psom.nodes{k}": n for k, n in enumerate(self.psom.nodes)}}
 
     @classmethod
-    def load(cls, path: str | Path, expect_object: str | None = None) -> HoughModel:
-        """Read a model written by ``save``.
-
-        Raises:
-            BundleError: the file is missing, corrupt, of another system or version,
-                inconsistent, or taught on another object than ``expect_object``.
-        """
-        info, arrays = read_model(path, KIND, FORMAT_VERSION)
-        try:
-            pose = nominal_pose_of(info)
-            kappa = info["kappa"]
-            model = cls(
-                object_kind=str(info["object_kind"]), kappa=kappa, nominal_pose=pose,
-                front=FrontEnd.from_info(info),
-                config=from_mapping(HoughConfig, info["hough"], "hough"),
-                edge_settings=EdgeSettings(**info["edge_settings"]),
-                constellation=ConstellationModel(**info["constellation"]),
-                angle_map=AngleMap(kappa, int(info["angle_map"]["harmonics"]),
-                                   arrays["angle_map.coefficients"]),
-                psom=PSOM(tuple(arrays[f"psom.nodes{k}"] for k in range(info["psom"]["axes"])),
-                          arrays["psom.weights"], tuple(info["psom"]["inputs"]),
-                          arrays["psom.scale"]),
-                training=info.get("training", {}))
-        except (KeyError, TypeError, ValueError, AttributeError, FineposError) as exc:
-            raise BundleError(f"{path}: inconsistent hough model: {exc}") from exc
-        check_taught_object(path, "hough", model.object_kind, expect_object)
-        return model
+    def from_file(cls, info: dict[str, Any], arrays: dict[str, np.ndarray],
+                  taught: dict[str, Any]) -> HoughModel:
+        """A Hough model from a model file's contents (see ``TaughtModel.from_file``)."""
+        return cls(**taught, config=from_mapping(HoughConfig, info["hough"], "hough"),
+                   edge_settings=EdgeSettings(**info["edge_settings"]),
+                   constellation=ConstellationModel(**info["constellation"]),
+                   angle_map=AngleMap(taught["kappa"], int(info["angle_map"]["harmonics"]),
+                                      arrays["angle_map.coefficients"]),
+                   psom=PSOM(tuple(arrays[f"psom.nodes{k}"]
+                                   for k in range(info["psom"]["axes"])),
+                             arrays["psom.weights"], tuple(info["psom"]["inputs"]),
+                             arrays["psom.scale"]))

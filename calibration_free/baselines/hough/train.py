@@ -41,8 +41,8 @@ from calibration_free.baselines.hough.model import (
 from calibration_free.baselines.hough.psom import PSOM
 from calibration_free.dataset import Dataset
 from calibration_free.errors import TrainingError
-from calibration_free.front_end import PreparedSets, check_part, prepare_training
 from calibration_free.localise import Localisation, Polarity
+from calibration_free.training import PreparedSets, check_part, prepare_training
 from drivers.core.errors import ConfigError
 from drivers.core.pose import Pose
 

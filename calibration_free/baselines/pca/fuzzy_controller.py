@@ -21,6 +21,7 @@ import numpy as np
 
 from calibration_free.baselines.pca.bspline import bspline_basis, check_basis
 from calibration_free.errors import TrainingError
+from calibration_free.mlp import training_pairs
 from drivers.core.errors import ConfigError
 
 # The least-squares system is dense: rules ** 2 float64 (4096 rules: 134 MB).
@@ -144,13 +145,7 @@ def fit_fuzzy_controller(x: np.ndarray, y: np.ndarray, *, n_sets: int = 5, order
     check_basis(n_sets, order)
     if not (np.isfinite(smoothing) and smoothing >= 0):
         raise ConfigError(f"smoothing: must be a finite number >= 0, got {smoothing!r}")
-    x = np.asarray(x, dtype=np.float64)
-    y = np.asarray(y, dtype=np.float64)
-    if x.ndim != 2 or y.ndim != 2 or x.shape[0] != y.shape[0] or x.shape[0] < 2:
-        raise TrainingError(f"fuzzy controller: need (N, m) inputs and (N, n_out) targets with "
-                            f"N >= 2, got {x.shape} and {y.shape}")
-    if not (np.isfinite(x).all() and np.isfinite(y).all()):
-        raise TrainingError("fuzzy controller: inputs and targets must be finite")
+    x, y = training_pairs(x, y, "fuzzy controller")
     rules = n_sets ** x.shape[1]
     if rules > MAX_RULES:
         raise TrainingError(f"fuzzy controller: {n_sets} sets on {x.shape[1]} inputs make "

@@ -12,27 +12,20 @@ File: ``model_file`` with kind "pca"; arrays ``nn1.*`` (``NumpyMLP.to_arrays``),
 
 from __future__ import annotations
 
+import dataclasses
 from dataclasses import dataclass, field
-from pathlib import Path
-from typing import Any
+from typing import Any, ClassVar
 
 import numpy as np
 
 from calibration_free import angles
 from calibration_free.baselines.pca.eigenimages import Eigenimages, roi_vector
 from calibration_free.baselines.pca.fuzzy_controller import MAX_RULES, BSplineFuzzyController
-from calibration_free.errors import BundleError
-from calibration_free.front_end import FrontEnd
 from calibration_free.localise import Localisation
 from calibration_free.mlp import NumpyMLP
-from calibration_free.model_file import (
-    check_taught_object,
-    nominal_pose_of,
-    read_model,
-    write_model,
-)
+from calibration_free.model_file import TaughtModel
 from calibration_free.roi import ROI_PX, extract_roi
-from drivers.core.errors import ConfigError, FineposError
+from drivers.core.errors import ConfigError
 from drivers.core.typed_config import from_mapping, to_mapping
 
 KIND = "pca"
@@ -78,6 +71,7 @@ class PcaPercept:
         features: the m eigenimage projections; None unless found and rotation was asked for.
         fc_sc: the fuzzy controller's (sin, cos) of kappa dphi; None like ``features``.
         dphi_deg: the corrective rotation; None like ``features``.
+        normalised: the normalised frame the ROI is cut from (kept for ``rotation``).
     """
 
     localisation: Localisation
@@ -85,10 +79,11 @@ class PcaPercept:
     features: np.ndarray | None = None
     fc_sc: tuple[float, float] | None = None
     dphi_deg: float | None = None
+    normalised: np.ndarray | None = field(default=None, repr=False, compare=False)
 
 
 @dataclass(frozen=True, eq=False)
-class PcaModel:
+class PcaModel(TaughtModel):
     """A trained PCA system for one part.
 
     Attributes:
@@ -101,15 +96,13 @@ class PcaModel:
         training: JSON-able training metadata (seconds, samples, explained variance...).
     """
 
-    object_kind: str
-    kappa: int
-    nominal_pose: dict[str, float]
-    front: FrontEnd
+    file_kind: ClassVar[str] = KIND
+    file_version: ClassVar[int] = FORMAT_VERSION
+
     config: PcaConfig
     nn1: NumpyMLP
     eigen: Eigenimages
     controller: BSplineFuzzyController
-    training: dict[str, Any] = field(default_factory=dict)
 
     def __post_init__(self) -> None:
         n = self.config.roi_px ** 2
@@ -135,66 +128,76 @@ class PcaModel:
         roi = extract_roi(normalised, u_px, v_px, self.config.roi_px)
         return self.eigen.project(roi_vector(roi))
 
-    def perceive(self, image: np.ndarray, rotation: bool = True) -> PcaPercept:
-        """Translation (NN1) and, if asked, rotation (eigenimages + fuzzy controller).
+    def translation(self, image: np.ndarray) -> PcaPercept:
+        """Translation only (NN1); the percept keeps the normalised frame for ``rotation``.
 
         Raises:
             ImageError: the frame is not HxWx3 uint8 of the training frames' size.
         """
-        normalised = self.front.normalise(image)
-        loc = self.front.localise(normalised)
+        normalised, loc = self.front.locate(image)
         if not loc.ok:
             return PcaPercept(loc, None)
         dx, dy = self.nn1(np.array((loc.u_px, loc.v_px)))
-        if not rotation:
-            return PcaPercept(loc, (float(dx), float(dy)))
-        features = self.features(normalised, loc.u_px, loc.v_px)
-        s, c = self.controller(features)
-        return PcaPercept(loc, (float(dx), float(dy)), features, (float(s), float(c)),
-                          float(angles.decode(float(s), float(c), self.kappa)))
+        return PcaPercept(loc, (float(dx), float(dy)), normalised=normalised)
 
-    def save(self, path: str | Path) -> None:
-        """Write the model atomically.
+    def rotation(self, percept: PcaPercept) -> PcaPercept:
+        """Go on from a ``translation`` percept of the same frame: eigenimage projections of
+        the ROI -> fuzzy controller -> dphi. A percept without the object is returned as is.
 
         Raises:
-            BundleError: the training metadata is not JSON-serialisable.
+            ValueError: the percept is not one of ``translation``'s (no frame kept).
         """
-        info = {"object_kind": self.object_kind, "kappa": self.kappa,
-                "nominal_pose": self.nominal_pose, **self.front.to_info(),
-                "pca": to_mapping(self.config),
-                "fuzzy": {"n_sets": self.controller.n_sets, "order": self.controller.order},
-                "training": self.training}
-        arrays = {**self.nn1.to_arrays("nn1"), "pca.mean": self.eigen.mean,
-                  "pca.basis": self.eigen.basis,
-                  "pca.singular_values": self.eigen.singular_values,
-                  "fc.lo": self.controller.lo, "fc.hi": self.controller.hi,
-                  "fc.consequents": self.controller.consequents}
-        write_model(path, KIND, FORMAT_VERSION, info, arrays)
+        if percept.nn1_mm is None:
+            return percept
+        if percept.normalised is None:
+            raise ValueError("rotation: needs the percept that translation() returned")
+        loc = percept.localisation
+        features = self.features(percept.normalised, loc.u_px, loc.v_px)
+        s, c = self.controller(features)
+        return dataclasses.replace(percept, features=features, fc_sc=(float(s), float(c)),
+                                   dphi_deg=float(angles.decode(float(s), float(c),
+                                                                self.kappa)))
+
+    def perceive(self, image: np.ndarray) -> PcaPercept:
+        """Translation (NN1) and rotation (eigenimages + fuzzy controller) in one pass.
+
+        Raises:
+            ImageError: the frame is not HxWx3 uint8 of the training frames' size.
+        """
+        return self.rotation(self.translation(image))
+
+    def system_info(self) -> dict[str, Any]:
+        """The PCA system's own JSON: its config (``pca``) and the controller's shape
+        (``fuzzy``).
+
+        Returns:
+            A JSON-able dict, merged into the file's JSON by ``to_info``.
+        """
+        return {"pca": to_mapping(self.config),
+                "fuzzy": {"n_sets": self.controller.n_sets, "order": self.controller.order}}
+
+    def arrays(self) -> dict[str, np.ndarray]:
+        """NN1, the eigenimages and the fuzzy controller as named arrays.
+
+        Returns:
+            ``nn1.*``, ``pca.mean``, ``pca.basis``, ``pca.singular_values``, ``fc.lo``,
+            ``fc.hi``, ``fc.consequents``.
+        """
+        return {**self.nn1.to_arrays("nn1"), "pca.mean": self.eigen.mean,
+                "pca.basis": self.eigen.basis,
+                "pca.singular_values": self.eigen.singular_values,
+                "fc.lo": self.controller.lo, "fc.hi": self.controller.hi,
+                "fc.consequents": self.controller.consequents}
 
     @classmethod
-    def load(cls, path: str | Path, expect_object: str | None = None) -> PcaModel:
-        """Read a model written by ``save``.
-
-        Raises:
-            BundleError: the file is missing, corrupt, of another system or version,
-                inconsistent, or taught on another object than ``expect_object``.
-        """
-        info, arrays = read_model(path, KIND, FORMAT_VERSION)
-        try:
-            pose = nominal_pose_of(info)
-            model = cls(
-                object_kind=str(info["object_kind"]), kappa=info["kappa"], nominal_pose=pose,
-                front=FrontEnd.from_info(info),
-                config=from_mapping(PcaConfig, info["pca"], "pca"),
-                nn1=NumpyMLP.from_arrays(arrays, "nn1"),
-                eigen=Eigenimages(arrays["pca.mean"], arrays["pca.basis"],
-                                  arrays["pca.singular_values"]),
-                controller=BSplineFuzzyController(arrays["fc.lo"], arrays["fc.hi"],
-                                                  int(info["fuzzy"]["n_sets"]),
-                                                  int(info["fuzzy"]["order"]),
-                                                  arrays["fc.consequents"]),
-                training=info.get("training", {}))
-        except (KeyError, TypeError, ValueError, AttributeError, FineposError) as exc:
-            raise BundleError(f"{path}: inconsistent pca model: {exc}") from exc
-        check_taught_object(path, "pca", model.object_kind, expect_object)
-        return model
+    def from_file(cls, info: dict[str, Any], arrays: dict[str, np.ndarray],
+                  taught: dict[str, Any]) -> PcaModel:
+        """A PCA model from a model file's contents (see ``TaughtModel.from_file``)."""
+        return cls(**taught, config=from_mapping(PcaConfig, info["pca"], "pca"),
+                   nn1=NumpyMLP.from_arrays(arrays, "nn1"),
+                   eigen=Eigenimages(arrays["pca.mean"], arrays["pca.basis"],
+                                     arrays["pca.singular_values"]),
+                   controller=BSplineFuzzyController(arrays["fc.lo"], arrays["fc.hi"],
+                                                     int(info["fuzzy"]["n_sets"]),
+                                                     int(info["fuzzy"]["order"]),
+                                                     arrays["fc.consequents"]))

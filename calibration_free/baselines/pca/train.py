@@ -18,11 +18,15 @@ from calibration_free.baselines.pca.eigenimages import fit_eigenimages, roi_vect
 from calibration_free.baselines.pca.fuzzy_controller import fit_fuzzy_controller
 from calibration_free.baselines.pca.model import PcaConfig, PcaModel
 from calibration_free.dataset import Dataset
-from calibration_free.front_end import check_part, prepare_training
 from calibration_free.localise import Polarity
 from calibration_free.mlp import train_mlp
-from calibration_free.pipeline import NN1_EPOCHS, NN1_HIDDEN
 from calibration_free.roi import extract_roi
+from calibration_free.training import (
+    NN1_EPOCHS,
+    NN1_HIDDEN,
+    check_part,
+    prepare_training,
+)
 from drivers.core.pose import Pose
 
 logger = logging.getLogger(__name__)
@@ -44,7 +48,7 @@ def train_pca(nn1_data: Dataset, nn2_data: Dataset, *, object_kind: str, kappa: 
         polarity: "bright" if the object is brighter than the table after max(R, G, B).
 
     Raises:
-        TrainingError: bad arguments or images (see ``front_end.prepare_training``), m larger
+        TrainingError: bad arguments or images (see ``training.prepare_training``), m larger
             than the rank of the ROIs, or a projection that does not vary.
     """
     start = time.perf_counter()

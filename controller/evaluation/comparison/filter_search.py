@@ -31,18 +31,18 @@ from pathlib import Path
 
 import numpy as np
 
-from calibration_free import angles
+from calibration_free import angles, training
 from calibration_free.dataset import Dataset, random_offsets
 from calibration_free.gabor import GaborBank, GaborConfig
-from calibration_free.mlp import train_mlp
-from calibration_free.pipeline import NN2_EPOCHS, Perception
+from calibration_free.perception import Perception
 from calibration_free.roi import extract_roi
 from controller.devices import open_devices
 from controller.evaluation.comparison.pools import Tick, open_pool
 from controller.evaluation.metrics import is_safe, state_at
 from controller.evaluation.trials import default_scene_config, run_trials
 from controller.fine_positioner import FinePositioner
-from controller.systems.registry import GaborSystem, TrainedModel
+from controller.systems.base import TrainedModel
+from controller.systems.gabor import GaborSystem
 from controller.teach.acquisition import acquire, transfer
 from controller.teach.cell_state import CellState
 from drivers.core.errors import FineposError
@@ -183,20 +183,29 @@ def prepare_repeat(job: _RepeatJob, tick: Tick) -> RepeatData:
 
 
 def train_nn2(data: RepeatData, gabor: GaborConfig, perception_cfg) -> TrainedModel:
-    """The repeat's base model with NN2 retrained on ``gabor``'s features of the stored ROIs."""
+    """The repeat's base model with NN2 retrained on ``gabor``'s features of the stored ROIs.
+
+    NN2 is trained by ``calibration_free.training.train_nn2``, the recipe ``train_bundle``
+    uses, with the repeat's seed and the config's hidden sizes and weight decay.
+
+    Args:
+        data: the repeat (its base model, seed and training ROIs).
+        gabor: the filter bank to train on.
+        perception_cfg: the perception config (``nn2_hidden``, ``nn2_weight_decay``).
+
+    Returns:
+        The base model with ``gabor`` and the new NN2; its train_seconds are NN2's.
+    """
     base = data.base.model
-    bank = GaborBank(gabor)
-    features = np.stack([bank.features(roi) for roi in data.train.rois])
-    s, c = angles.encode(data.train.dphi_deg, base.kappa)
-    nn2 = train_mlp(features, np.stack([s, c], axis=1), tuple(perception_cfg.nn2_hidden),
-                    seed=data.seed + 1, epochs=NN2_EPOCHS,
-                    weight_decay=perception_cfg.nn2_weight_decay)
-    training = {**base.training, "nn2": {"layers": list(nn2.model.layer_sizes),
-                                         "seconds": nn2.seconds,
-                                         "epochs": len(nn2.loss_curve),
-                                         "final_loss": nn2.loss_curve[-1]}}
-    bundle = dataclasses.replace(base, gabor=gabor, nn2=nn2.model, training=training)
-    return TrainedModel("gabor", bundle, nn2.seconds, data.base.train_images, bank.n_features)
+    nn2 = training.train_nn2(data.train.rois, data.train.dphi_deg, base.kappa, gabor,
+                             seed=data.seed, hidden=tuple(perception_cfg.nn2_hidden),
+                             weight_decay=perception_cfg.nn2_weight_decay)
+    meta = {**base.training, "nn2": {"layers": list(nn2.model.layer_sizes),
+                                     "seconds": nn2.seconds,
+                                     "epochs": len(nn2.loss_curve),
+                                     "final_loss": nn2.loss_curve[-1]}}
+    bundle = dataclasses.replace(base, gabor=gabor, nn2=nn2.model, training=meta)
+    return TrainedModel("gabor", bundle, nn2.seconds, data.base.train_images, gabor.n_filters)
 
 
 def open_loop_rms_deg(model: TrainedModel, test: RoiSet) -> float:

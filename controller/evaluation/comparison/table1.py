@@ -25,7 +25,8 @@ from controller.evaluation.trials import (
     with_lighting,
 )
 from controller.loop.positioning import LoopState
-from controller.systems.registry import SYSTEMS, TrainedModel
+from controller.systems.base import TrainedModel
+from controller.systems.registry import SYSTEMS
 from drivers.core.errors import FineposError
 
 logger = logging.getLogger(__name__)
@@ -131,4 +132,4 @@ def run_table1(config, *, trials: int, seed: int, workers: int,
 
 def localisation_channel(model) -> str:
     """The image a trained system localises the part in (the baselines: max(R,G,B))."""
-    return getattr(model.model, "channel", "max")
+    return model.model.front.channel

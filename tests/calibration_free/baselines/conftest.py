@@ -33,9 +33,3 @@ def pca_model(grids) -> PcaModel:
 def hough_model(grids) -> HoughModel:
     nn1, nn2 = grids
     return train_hough(nn1, nn2, object_kind="cube", kappa=KAPPA, nominal_pose=NOMINAL_POSE)
-
-
-def wrapped_error_deg(estimate: np.ndarray, truth: np.ndarray) -> np.ndarray:
-    """Rotation errors folded into the symmetry period (-180/kappa, 180/kappa]."""
-    half = 180.0 / KAPPA
-    return (np.asarray(estimate) - np.asarray(truth) + half) % (2 * half) - half

@@ -10,8 +10,7 @@ from calibration_free.baselines.hough.train import train_hough
 from calibration_free.dataset import random_offsets
 from calibration_free.errors import BundleError, TrainingError
 from calibration_free.synthetic import SyntheticCell, render, render_at, render_dataset
-
-from .conftest import KAPPA, NOMINAL_POSE, wrapped_error_deg
+from tests.synthetic_scene import KAPPA, NOMINAL_POSE, wrapped_error_deg
 
 
 def test_recovers_rotation_and_translation_on_unseen_poses(hough_model, near_test_set, cell):

@@ -8,10 +8,10 @@ import pytest
 from calibration_free.baselines.pca.model import PcaConfig, PcaModel
 from calibration_free.baselines.pca.train import train_pca
 from calibration_free.errors import BundleError, ImageError, TrainingError
+from calibration_free.model_file import pack_model
 from calibration_free.synthetic import render
 from drivers.core.errors import ConfigError
-
-from .conftest import KAPPA, NOMINAL_POSE, wrapped_error_deg
+from tests.synthetic_scene import KAPPA, NOMINAL_POSE, wrapped_error_deg
 
 
 def test_recovers_rotation_and_translation_on_unseen_poses(pca_model, near_test_set):
@@ -26,7 +26,7 @@ def test_recovers_rotation_and_translation_on_unseen_poses(pca_model, near_test_
 
 def test_translation_only_path_and_an_empty_table(pca_model, cell):
     frame = render(cell, np.array([3.0, -2.0, 20.0]))
-    fast = pca_model.perceive(frame, rotation=False)
+    fast = pca_model.translation(frame)
     assert fast.features is None and fast.nn1_mm is not None
     empty = np.full_like(frame, 125)
     p = pca_model.perceive(empty)
@@ -46,6 +46,21 @@ def test_round_trip_gives_the_same_answers(pca_model, cell, tmp_path):
     assert again.training["images"] == 126
     with pytest.raises(BundleError, match="taught on object 'cube', not 'nut'"):
         PcaModel.load(path, expect_object="nut")
+
+
+def test_a_file_without_channel_and_nominal_uv_loads_as_before(pca_model, cell, tmp_path):
+    """Baseline files from before the front end stored its channel and the taught pose's
+    image position: localisation in max(R, G, B), several matching blobs ambiguous."""
+    info = pca_model.to_info()
+    del info["localisation"]["channel"], info["localisation"]["nominal_uv_px"]
+    path = tmp_path / "old.pca"
+    path.write_bytes(pack_model("pca", 1, info, pca_model.arrays()))
+    old = PcaModel.load(path)
+    assert old.front == pca_model.front
+    assert (old.front.channel, old.front.nominal_uv_px) == ("max", None)
+    frame = render(cell, np.array([2.0, -3.0, 12.0]), np.random.default_rng(0))
+    a, b = pca_model.perceive(frame), old.perceive(frame)
+    assert (a.nn1_mm, a.fc_sc, a.dphi_deg) == (b.nn1_mm, b.fc_sc, b.dphi_deg)
 
 
 def test_corrupt_file_is_refused(pca_model, tmp_path):

@@ -1,0 +1,147 @@
+"""Perception of one hand-camera frame with a trained model bundle (the paper's Fig. 3).
+
+The bundle's front end (max channel -> normalisation, or saturation -> localisation) -> NN1
+(centre -> dx, dy): the half-loop path, ``Perception.translation``. ``Perception.rotation``
+goes on from that percept: 50x50 ROI -> 36 Gabor features -> NN2 (features -> sin/cos of kappa
+dphi) -> dphi, and the full loop's translation. ``perceive`` is both in one pass.
+"""
+
+from __future__ import annotations
+
+import time
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from calibration_free import angles
+from calibration_free.bundle import ModelBundle
+from calibration_free.gabor import GaborBank
+from calibration_free.localise import Localisation
+from calibration_free.roi import extract_roi
+
+
+@dataclass(frozen=True)
+class Percept:
+    """What perception saw in one frame.
+
+    Attributes:
+        localisation: where the object is, or why it was not found.
+        nn1_mm: NN1's corrective translation (dx_mm, dy_mm); None unless localisation is ok.
+        features: the Gabor features (float32); None unless ok and rotation was asked for.
+        nn2_sc: NN2's raw (sin, cos) of kappa dphi; None like ``features``.
+        dphi_deg: the corrective rotation decoded from nn2_sc; None like ``features``.
+        timings_us: microseconds per stage (preprocess, localise, roi, features, nn1, nn2,
+            total); stages not run are absent.
+        full_mm: the full loop's translation, from (u, v) and NN2's rotation (the bundle's
+            ``nn1_rot``); None like ``features``.
+        normalised: the preprocessed frame the ROI is cut from (kept for ``rotation``).
+    """
+
+    localisation: Localisation
+    nn1_mm: tuple[float, float] | None
+    features: np.ndarray | None
+    nn2_sc: tuple[float, float] | None
+    dphi_deg: float | None
+    timings_us: dict[str, float]
+    full_mm: tuple[float, float] | None = None
+    normalised: np.ndarray | None = field(default=None, repr=False, compare=False)
+
+    @property
+    def ok(self) -> bool:
+        return self.localisation.status == "ok"
+
+    @property
+    def u_px(self) -> float | None:
+        return self.localisation.u_px
+
+    @property
+    def v_px(self) -> float | None:
+        return self.localisation.v_px
+
+
+class Perception:
+    """Runs a trained bundle on hand-camera frames (HxWx3 uint8 RGB).
+
+    Args:
+        bundle: the trained model; its ``front`` preprocesses and localises, its networks
+            map the result to the corrective step.
+    """
+
+    def __init__(self, bundle: ModelBundle):
+        self.bundle = bundle
+        self._front = bundle.front
+        self._bank = GaborBank(bundle.gabor)
+        self._roi_px = bundle.gabor.roi_px
+
+    def locate(self, image: np.ndarray) -> tuple[np.ndarray, Localisation]:
+        """The preprocessed image (``FrontEnd.preprocess``) and the object's localisation in it.
+
+        Args:
+            image: an HxWx3 uint8 RGB frame.
+
+        Raises:
+            ImageError: the frame is not HxWx3 uint8 of the size the bundle was trained on.
+        """
+        return self._front.locate(image)
+
+    def translation(self, image: np.ndarray) -> Percept:
+        """NN1 only: the corrective translation (the half-loop fast path). The percept keeps
+        the preprocessed frame, so ``rotation`` can go on from it without a second pass.
+
+        Raises:
+            ImageError: the frame is not HxWx3 uint8 of the size the bundle was trained on.
+        """
+        clock = time.perf_counter_ns
+        t0 = clock()
+        normalised = self._front.preprocess(image)
+        t1 = clock()
+        loc = self._front.localise(normalised)
+        t2 = clock()
+        timings = {"preprocess": (t1 - t0) / 1e3, "localise": (t2 - t1) / 1e3}
+        if loc.status != "ok":
+            timings["total"] = (t2 - t0) / 1e3
+            return Percept(loc, None, None, None, None, timings)
+        dx, dy = self.bundle.nn1(np.array((loc.u_px, loc.v_px)))
+        t3 = clock()
+        timings.update(nn1=(t3 - t2) / 1e3, total=(t3 - t0) / 1e3)
+        return Percept(loc, (float(dx), float(dy)), None, None, None, timings,
+                       normalised=normalised)
+
+    def rotation(self, percept: Percept) -> Percept:
+        """Go on from a ``translation`` percept of the same frame: ROI -> Gabor features ->
+        NN2 -> dphi, and the full loop's translation (``nn1_rot``). A percept whose object was
+        not found is returned as it is.
+
+        Raises:
+            ValueError: the percept is not one of ``translation``'s (no frame kept).
+        """
+        if not percept.ok:
+            return percept
+        if percept.normalised is None:
+            raise ValueError("rotation: needs the percept that translation() returned")
+        clock = time.perf_counter_ns
+        t3 = clock()
+        loc = percept.localisation
+        roi = extract_roi(percept.normalised, loc.u_px, loc.v_px, self._roi_px)
+        t4 = clock()
+        features = self._bank.features(roi)
+        t5 = clock()
+        s, c = self.bundle.nn2(features)
+        dphi = angles.decode(float(s), float(c), self.bundle.kappa)
+        norm = max(float(np.hypot(s, c)), 1e-9)
+        dx_rot, dy_rot = self.bundle.nn1_rot(
+            np.array((loc.u_px, loc.v_px, float(s) / norm, float(c) / norm)))
+        t6 = clock()
+        timings = dict(percept.timings_us)
+        timings.update(roi=(t4 - t3) / 1e3, features=(t5 - t4) / 1e3, nn2=(t6 - t5) / 1e3,
+                       total=timings["total"] + (t6 - t3) / 1e3)
+        return Percept(loc, percept.nn1_mm, features, (float(s), float(c)), dphi, timings,
+                       (float(dx_rot), float(dy_rot)), percept.normalised)
+
+    def perceive(self, image: np.ndarray) -> Percept:
+        """The whole path in one pass: corrective translation (NN1) and rotation (NN2).
+
+        Raises:
+            ImageError: the frame is not HxWx3 uint8 of the size the bundle was trained on.
+        """
+        return self.rotation(self.translation(image))
