@@ -17,12 +17,13 @@ from calibration_free.dataset import Dataset
 from controller.loop.grasp import GraspResult, guarded_grasp
 from controller.loop.iteration_log import IterationLog
 from controller.loop.positioning import PositioningLoop, PositioningResult
-from controller.systems.registry import SYSTEMS, TrainedModel
+from controller.systems.base import TrainedModel
+from controller.systems.registry import SYSTEMS
 from controller.teach.acquisition import acquire, grid_for, random_set, transfer
 from controller.teach.cell_state import CellState
+from drivers.core import parts
 from drivers.core.errors import FineposError
 from drivers.core.pose import Pose
-from sim_backend.cell.objects import PARTS
 
 logger = logging.getLogger(__name__)
 
@@ -30,7 +31,15 @@ DATASETS = ("nn1", "nn2", "test")
 
 
 class FinePositioner:
-    """Teach-in, acquisition, training, the positioning loop and the grasp hand-off."""
+    """Teach-in, acquisition, training, the positioning loop and the grasp hand-off.
+
+    Args:
+        devices: the opened devices (``controller.devices.CellDevices``: arm, camera, wrench,
+            and the simulated cell or None).
+        config: the root config (``controller.config.FineposConfig``).
+        log: where each loop iteration is written (None: not logged).
+        state_dir: the cell's files (default ``controller.paths.state_dir``).
+    """
 
     def __init__(self, devices, config, log: IterationLog | None = None,
                  state_dir: str | Path | None = None) -> None:
@@ -44,44 +53,64 @@ class FinePositioner:
     # -- files ----------------------------------------------------------------------------
     @property
     def state_path(self) -> Path:
+        """The teach-in file, ``cell.json``."""
         return self.state_dir / "cell.json"
 
     def dataset_path(self, name: str) -> Path:
+        """Where the acquired set ``name`` (nn1, nn2, test) is stored."""
         return self.state_dir / "datasets" / f"{name}.npz"
 
     def model_path(self, system: str = "gabor") -> Path:
+        """Where ``system``'s trained model is stored."""
         return self.state_dir / f"model-{system}{SYSTEMS[system].suffix}"
 
     def state(self) -> CellState:
+        """What teach-in recorded.
+
+        Raises:
+            StateError: nothing taught yet, or the file is damaged.
+        """
         return CellState.load(self.state_path)
 
     # -- teach-in -------------------------------------------------------------------------
     def teach(self, source: str, grasp_depth_mm: float | None = None,
               object_width_mm: float | None = None) -> CellState:
-        """Record the arm's current pose as the nominal pre-grasp pose (``source`` says how
-        the arm got there). Part data default to the simulated part's, or must be given."""
+        """Record the arm's current pose as the nominal pre-grasp pose, with the part's
+        symmetry and grasp geometry, into ``cell.json``.
+
+        Args:
+            source: how the arm got there (``auto``, ``current``, ``spacenav``), stored.
+            grasp_depth_mm: the descent from the pose to grip; default: the part's (the
+                simulated part on the simulated cell, else ``controller.part`` from the parts
+                catalogue).
+            object_width_mm: the finger width holding the part; default as above.
+
+        Returns:
+            The stored state.
+        """
         pose = self.devices.arm.pose()
         cell = self.devices.cell
         if cell is not None:
-            part = cell.part
-            grasp_depth_mm = cell.grasp_depth_mm if grasp_depth_mm is None else grasp_depth_mm
-            object_width_mm = part.grasp_width_mm if object_width_mm is None else object_width_mm
-            kind, kappa = part.kind, part.kappa
+            part = cell.part.part
+            default_depth = cell.grasp_depth_mm
         else:
-            kind = self.config.scene.object.kind
-            kappa = PARTS[kind].kappa
-            if grasp_depth_mm is None or object_width_mm is None:
-                raise FineposError("teach on a real cell needs --grasp-depth-mm and "
-                                   "--object-width-mm")
-        state = CellState(pose, kind, kappa, float(grasp_depth_mm), float(object_width_mm),
-                          source, CellState.now())
+            part = parts.part(self.config.controller.part)
+            default_depth = part.grasp_depth_mm
+        grasp_depth_mm = default_depth if grasp_depth_mm is None else grasp_depth_mm
+        object_width_mm = part.grasp_width_mm if object_width_mm is None else object_width_mm
+        state = CellState(pose, part.kind, part.kappa, float(grasp_depth_mm),
+                          float(object_width_mm), source, CellState.now())
         state.save(self.state_path)
         logger.info("taught nominal pose %s (%s, kappa %d) from %s into %s", pose.as_dict(),
-                    kind, kappa, source, self.state_path)
+                    part.kind, part.kappa, source, self.state_path)
         return state
 
     def teach_auto(self) -> CellState:
-        """Simulated cell only: place the gripper at the part's true grasp pose and record it."""
+        """Simulated cell only: place the gripper at the part's true grasp pose and record it.
+
+        Raises:
+            FineposError: not on the simulated cell.
+        """
         cell = self.devices.cell
         if cell is None:
             raise FineposError("teach --auto needs the simulated cell (arm type sim)")
@@ -89,12 +118,26 @@ class FinePositioner:
         return self.teach("auto")
 
     def move_to(self, target: Pose) -> None:
-        """Move there in steps within the safety limits."""
+        """Move there in steps within the safety limits (``safety.max_step_mm``/``_deg``)."""
         limits = self.config.safety
         transfer(self.devices.arm, target, limits.max_step_mm, limits.max_step_deg)
 
     # -- acquisition and training ----------------------------------------------------------
     def acquire(self, name: str, seed: int = 0, progress: bool = True) -> Dataset:
+        """Take a set of images around the taught pose and store it.
+
+        Args:
+            name: ``nn1`` (the 3x3x7 translation grid), ``nn2`` (the rotation grid) or ``test``
+                (random displacements, ``controller.acquisition.test_count``).
+            seed: draws the test set's displacements.
+            progress: show a progress bar.
+
+        Returns:
+            The set: one image and the exact tool-frame step back to the taught pose each.
+
+        Raises:
+            FineposError: an unknown set name, or nothing taught yet.
+        """
         if name not in DATASETS:
             raise FineposError(f"unknown dataset {name!r} (one of {', '.join(DATASETS)})")
         state = self.state()
@@ -114,6 +157,12 @@ class FinePositioner:
         return data
 
     def train(self, system: str = "gabor") -> TrainedModel:
+        """Train ``system`` on the stored nn1 and nn2 sets, store its model and use it.
+
+        Raises:
+            DatasetError: a set is missing or damaged.
+            TrainingError: the sets cannot train the system.
+        """
         state = self.state()
         nn1 = Dataset.load(self.dataset_path("nn1"))
         nn2 = Dataset.load(self.dataset_path("nn2"))
@@ -126,15 +175,31 @@ class FinePositioner:
         return model
 
     def load_model(self, path: str | Path | None = None, system: str = "gabor") -> TrainedModel:
+        """Load and use a model file (default: ``system``'s stored model), checked to be
+        taught on the taught part.
+
+        Raises:
+            BundleError: the file is missing, damaged, of another system or another part.
+        """
         state = self.state()
         self._model = SYSTEMS[system].load(path or self.model_path(system), state)
         return self._model
 
     def use_model(self, model: TrainedModel) -> None:
+        """Use an already trained or loaded model for the next positioning runs."""
         self._model = model
 
     # -- positioning and grasp --------------------------------------------------------------
     def position(self, max_loops: float | None = None) -> PositioningResult:
+        """Run the positioning loop from wherever the arm is (loading the stored model first
+        if none is in use).
+
+        Args:
+            max_loops: the loop budget (default ``controller.loop.max_loops``).
+
+        Returns:
+            The outcome, loops spent and the state after every move (``PositioningResult``).
+        """
         if self._model is None:
             self.load_model()
         estimator = SYSTEMS[self._model.system].estimator(self._model)
@@ -147,6 +212,12 @@ class FinePositioner:
             self._loop = None
 
     def grasp(self) -> GraspResult:
+        """The force-guarded grasp from the pre-grasp pose (``controller.loop.grasp``): open,
+        descend the taught depth under the guards, close, verify, lift.
+
+        Returns:
+            Whether the part is held, the guard that tripped (if any) and the readings.
+        """
         state = self.state()
         return guarded_grasp(self.devices.arm, self.devices.wrench, state.grasp_depth_mm,
                              state.object_width_mm, self.config.controller.grasp)

@@ -29,7 +29,8 @@ from controller.devices import open_devices
 from controller.evaluation.hil import open_hil_devices
 from controller.evaluation.metrics import summarise
 from controller.fine_positioner import FinePositioner
-from controller.systems.registry import SYSTEMS, TrainedModel
+from controller.systems.base import TrainedModel
+from controller.systems.registry import SYSTEMS
 from drivers.core.errors import FineposError
 from drivers.core.pose import ToolStep
 
@@ -133,6 +134,7 @@ def device_opener(hil: bool):
 
 
 def cell_kind(config) -> str:
+    """The kind of part on ``config``'s scene (``scene.object.kind``)."""
     return config.scene.object.kind
 
 

@@ -17,14 +17,14 @@ import uuid
 from collections.abc import Callable
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any, Literal
+from typing import Literal
 
 import cv2
 
 from controller.loop.iteration_log import IterationLog
-from controller.systems.estimator import Estimator
+from controller.loop.record import IterationRecord, LoopKind
+from controller.systems.estimator import Estimator, corrective_step
 from drivers.core.errors import MotionRejectedError
-from drivers.core.pose import ToolStep
 from drivers.interfaces import Arm, Camera
 
 logger = logging.getLogger(__name__)
@@ -74,6 +74,7 @@ class PositioningResult:
 
     @property
     def ok(self) -> bool:
+        """The loop ran to convergence or spent its budget (no lost part, no rejection)."""
         return self.outcome in ("converged", "budget")
 
 
@@ -100,6 +101,18 @@ class PositioningLoop:
 
     def run(self, estimator: Estimator, max_loops: float | None = None,
             run_id: str | None = None) -> PositioningResult:
+        """Position from wherever the arm is, one look per iteration, until converged.
+
+        Args:
+            estimator: the vision system (``controller.systems``).
+            max_loops: the loop budget (default ``config.max_loops``).
+            run_id: names the run in the iteration log (default: a fresh random id).
+
+        Returns:
+            The outcome, the loops spent and the state after every move (see
+            PositioningResult). A lost part, a rejected step and an abort end the run
+            without an exception.
+        """
         cfg = self.config
         budget = cfg.max_loops if max_loops is None else max_loops
         run_id = run_id or uuid.uuid4().hex[:12]
@@ -121,47 +134,37 @@ class PositioningLoop:
             frame = self.camera.grab()
             t1 = time.perf_counter()
             tr = estimator.estimate_translation(frame.image)
-            record: dict[str, Any] = {
-                "time": time.time(), "run_id": run_id, "system": estimator.name,
-                "iteration": iteration + 1, "u_px": tr.u_px, "v_px": tr.v_px,
-                "status": tr.status, **tr.record,
-            }
+            record = IterationRecord(time.time(), run_id, estimator.name, iteration + 1,
+                                     tr.u_px, tr.v_px, tr.status, dict(tr.record),
+                                     loops=loops, error=states[-1].error)
             if tr.status != "ok":
-                t2 = time.perf_counter()
-                self._write(record, "stop", loops, None, None, False, None, t0, t1, t2, t2,
-                            frame.image, states[-1].error)
+                self._write(record, "stop", (t0, t1, time.perf_counter()), frame.image)
                 return finish(tr.status, tr.reason or tr.status)
-            shift = math.hypot(tr.dx_mm, tr.dy_mm)
-            if shift > cfg.r_fine_mm:
+            if math.hypot(tr.dx_mm, tr.dy_mm) > cfg.r_fine_mm:
                 kind, cost = "half", 0.5
-                step = ToolStep(tr.dx_mm, tr.dy_mm, 0.0, 0.0)
+                step = corrective_step(tr)
             else:
                 kind, cost = "full", 1.0
-                rot = estimator.estimate_rotation(frame.image, tr)
-                record.update(rot.record)
-                if rot.dx_mm is not None and rot.dy_mm is not None:
-                    shift = math.hypot(rot.dx_mm, rot.dy_mm)
-                    step = ToolStep(rot.dx_mm, rot.dy_mm, 0.0, rot.dphi_deg)
-                else:
-                    step = ToolStep(tr.dx_mm, tr.dy_mm, 0.0, rot.dphi_deg)
+                rot = estimator.estimate_rotation(tr)
+                record.estimates.update(rot.record)
+                step = corrective_step(tr, rot)
+            record.commanded = step
+            shift = math.hypot(step.dx_mm, step.dy_mm)
             t2 = time.perf_counter()
             if kind == "full" and shift <= cfg.converge_mm and \
                     abs(step.dphi_deg) <= cfg.converge_deg:
-                self._write(record, "check", loops, step, None, False, None, t0, t1, t2, t2,
-                            frame.image, states[-1].error)
-                return finish("converged", f"step {shift:.3f} mm / {step.dphi_deg:.2f} deg "
-                                           "below the convergence thresholds")
+                self._write(record, "check", (t0, t1, t2), frame.image)
+                return finish("converged", f"step {shift:.3f} mm / "
+                                           f"{step.dphi_deg:.2f} deg below the convergence "
+                                           "thresholds")
             if loops + cost > budget + 1e-9:
-                self._write(record, "stop", loops, step, None, False, None, t0, t1, t2, t2,
-                            frame.image, states[-1].error)
+                self._write(record, "stop", (t0, t1, t2), frame.image)
                 return finish("budget", f"loop budget {budget:g} spent")
             try:
                 motion = self.arm.move_tool(step)
             except MotionRejectedError as exc:
-                t3 = time.perf_counter()
-                record["rejected"] = exc.reason
-                self._write(record, "stop", loops, step, None, False, None, t0, t1, t2, t3,
-                            frame.image, states[-1].error)
+                record.rejected = exc.reason
+                self._write(record, "stop", (t0, t1, t2, time.perf_counter()), frame.image)
                 return finish("rejected", f"safety layer rejected the step: {exc.reason}")
             t3 = time.perf_counter()
             loops += cost
@@ -169,26 +172,25 @@ class PositioningLoop:
             error = self._error()
             states.append(LoopState(loops, error))
             per_iteration.append(t3 - t0)
-            self._write(record, kind, loops, step, motion.sent, motion.clipped, motion.pose,
-                        t0, t1, t2, t3, frame.image, error)
+            record.loops, record.error = loops, error
+            record.executed, record.clipped, record.pose_after = \
+                motion.sent, motion.clipped, motion.pose
+            self._write(record, kind, (t0, t1, t2, t3), frame.image)
 
-    def _write(self, record, kind, loops, commanded, executed, clipped, pose_after,
-               t0, t1, t2, t3, image, error=None) -> None:
+    def _write(self, record: IterationRecord, kind: LoopKind, clock: tuple[float, ...],
+               image) -> None:
+        """Log one look: ``clock`` is (start, grabbed, perceived[, moved]) from perf_counter;
+        without a move the move took no time."""
         if self.log is None:
             return
-        record.update({
-            "loop_kind": kind, "loops": loops,
-            "commanded": commanded.as_dict() if commanded else None,
-            "executed": executed.as_dict() if executed else None, "clipped": clipped,
-            "pose_after": pose_after.as_dict() if pose_after else None,
-            "timings_ms": {"grab": (t1 - t0) * 1e3, "perceive": (t2 - t1) * 1e3,
-                           "move": (t3 - t2) * 1e3},
-            "error": ({"x_mm": error[0], "y_mm": error[1], "phi_deg": error[2]}
-                      if error is not None else None),
-        })
+        t0, t1, t2 = clock[:3]
+        t3 = clock[3] if len(clock) > 3 else t2
+        record.loop_kind = kind
+        record.timings_ms = {"grab": (t1 - t0) * 1e3, "perceive": (t2 - t1) * 1e3,
+                             "move": (t3 - t2) * 1e3}
         if self.config.save_images and self.image_dir is not None:
-            name = f"{record['run_id']}-{record['iteration']:03d}-{kind}.png"
+            name = f"{record.run_id}-{record.iteration:03d}-{kind}.png"
             self.image_dir.mkdir(parents=True, exist_ok=True)
             cv2.imwrite(str(self.image_dir / name), cv2.cvtColor(image, cv2.COLOR_RGB2BGR))
-            record["image"] = name
-        self.log.write(record)
+            record.image = name
+        self.log.write(record.as_dict())

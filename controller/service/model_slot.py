@@ -8,7 +8,7 @@ from pathlib import Path
 from typing import Any
 
 from controller.fine_positioner import FinePositioner
-from controller.systems.registry import TrainedModel
+from controller.systems.base import TrainedModel
 
 DEFAULT_SYSTEM = "gabor"
 
@@ -23,13 +23,16 @@ class ModelSlot:
 
     @property
     def model(self) -> TrainedModel | None:
+        """The model in use, or None before one was set or loaded."""
         return self._model
 
     def info(self) -> dict[str, Any] | None:
+        """A copy of what ``status`` reports about the model in use, or None without one."""
         with self._lock:
             return dict(self._info) if self._info else None
 
     def set(self, model: TrainedModel, path: Path) -> None:
+        """Put ``model`` into use; ``path`` is its file, reported by ``info`` with the time."""
         with self._lock:
             self._model = model
             self._info = {"system": model.system, "file": str(path),

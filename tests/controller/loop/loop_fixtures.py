@@ -31,7 +31,7 @@ class TruthEstimator:
         return TranslationEstimate("ok", s.dx_mm * self.gain, s.dy_mm * self.gain, 96.0, 72.0,
                                    record={"nn1": [s.dx_mm, s.dy_mm]})
 
-    def estimate_rotation(self, image, translation):
+    def estimate_rotation(self, translation):
         self.rotation_calls += 1
         dphi = wrap_deg(self._step().dphi_deg, 360.0 / self.kappa) * self.gain
         return RotationEstimate(dphi, record={"nn2": [math.sin(4 * dphi), math.cos(4 * dphi)]})

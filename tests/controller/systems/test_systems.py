@@ -14,8 +14,7 @@ from controller.systems.estimator import RotationEstimate, TranslationEstimate
 from controller.systems.registry import SYSTEMS
 from controller.teach.cell_state import CellState
 from drivers.core.pose import Pose
-
-from .conftest import KAPPA, NOMINAL_POSE, wrapped_error_deg
+from tests.synthetic_scene import KAPPA, NOMINAL_POSE, wrapped_error_deg
 
 STATE = CellState(nominal_pose=Pose(**NOMINAL_POSE), object_kind="cube", kappa=KAPPA,
                   grasp_depth_mm=50.0, object_width_mm=30.0, source="auto", taught_at=0.0)
@@ -44,7 +43,7 @@ def test_estimator_recovers_a_known_step(trained, cell):
         assert isinstance(t, TranslationEstimate) and t.status == "ok", t.reason
         assert math.hypot(t.dx_mm - label[0], t.dy_mm - label[1]) < 1.0
         assert math.isfinite(t.u_px) and math.isfinite(t.v_px)
-        r = estimator.estimate_rotation(frame, t)
+        r = estimator.estimate_rotation(t)
         assert isinstance(r, RotationEstimate)
         assert abs(wrapped_error_deg(r.dphi_deg, label[2])) < 5.0
         assert r.record  # something for the iteration log

@@ -1,0 +1,79 @@
+"""The paper's system: NN1 on the part's centre, NN2 on 36 Gabor features of the ROI."""
+
+from __future__ import annotations
+
+import time
+from typing import Any
+
+import numpy as np
+
+from calibration_free.bundle import ModelBundle
+from calibration_free.dataset import Dataset
+from calibration_free.perception import Percept, Perception
+from calibration_free.training import train_bundle
+from controller.systems.base import TrainedModel, VisionSystem
+from controller.systems.estimator import RotationEstimate, TranslationEstimate, percept_of
+from controller.teach.cell_state import CellState
+
+
+class GaborEstimator:
+    """Runs a trained bundle (``calibration_free.perception``) in the positioning loop."""
+
+    name = "gabor"
+
+    def __init__(self, bundle: ModelBundle) -> None:
+        self.perception = Perception(bundle)
+
+    def estimate_translation(self, image: np.ndarray) -> TranslationEstimate:
+        """Localisation and NN1; see ``Estimator.estimate_translation``."""
+        p = self.perception.translation(image)
+        loc = p.localisation
+        if not p.ok:
+            return TranslationEstimate(loc.status, reason=loc.reason,
+                                       record={"area_px": loc.area_px}, percept=p)
+        return TranslationEstimate("ok", p.nn1_mm[0], p.nn1_mm[1], loc.u_px, loc.v_px,
+                                   record={"area_px": loc.area_px, "nn1": list(p.nn1_mm),
+                                           "perception_us": p.timings_us}, percept=p)
+
+    def estimate_rotation(self, translation: TranslationEstimate) -> RotationEstimate:
+        """ROI, Gabor features, NN2 and the rotation-aware translation; see
+        ``Estimator.estimate_rotation``."""
+        p = self.perception.rotation(percept_of(translation, Percept))
+        return RotationEstimate(p.dphi_deg, record={
+            "features": p.features.tolist(), "nn2": list(p.nn2_sc), "nn1_rot": list(p.full_mm),
+            "perception_us": p.timings_us}, dx_mm=p.full_mm[0], dy_mm=p.full_mm[1])
+
+
+class GaborSystem(VisionSystem):
+    """``gabor``: model file ``model-gabor.fpm`` (``calibration_free.bundle``)."""
+
+    name = "gabor"
+    suffix = ".fpm"
+    model_cls = ModelBundle
+    estimator_cls = GaborEstimator
+
+    @classmethod
+    def train(cls, nn1: Dataset, nn2: Dataset, state: CellState,
+              perception_cfg: Any) -> TrainedModel:
+        """Train NN1, the full loop's translation net and NN2 (``train_bundle``)."""
+        t0 = time.perf_counter()
+        bundle = train_bundle(
+            nn1, nn2, object_kind=state.object_kind, kappa=state.kappa,
+            nominal_pose=state.nominal_pose, gabor=perception_cfg.gabor,
+            nn2_hidden=tuple(perception_cfg.nn2_hidden),
+            nn2_weight_decay=perception_cfg.nn2_weight_decay,
+            localisation_channel=perception_cfg.localisation_channel, seed=perception_cfg.seed,
+            nn1_extra=nn2 if perception_cfg.nn1_uses_nn2_set else None)
+        return TrainedModel(cls.name, bundle, time.perf_counter() - t0, len(nn1) + len(nn2),
+                            bundle.gabor.n_filters)
+
+    @staticmethod
+    def training_cost(training: dict[str, Any]) -> tuple[float, int]:
+        """(seconds, images): the bundle counts the samples of each set it trained on."""
+        return (float(training.get("seconds", 0.0)),
+                int(sum(training.get("samples", {}).values())))
+
+    @staticmethod
+    def feature_count(model: ModelBundle) -> int:
+        """The Gabor bank's filter count."""
+        return model.gabor.n_filters
