@@ -16,7 +16,8 @@ from typing import Any, Literal
 from calibration_free.baselines.hough.model import HoughConfig
 from calibration_free.baselines.pca.model import PcaConfig
 from calibration_free.gabor import GaborConfig
-from calibration_free.pipeline import NN2_HIDDEN, NN2_WEIGHT_DECAY
+from calibration_free.training import NN2_HIDDEN, NN2_WEIGHT_DECAY
+from controller.devices import DeviceSection, parse_device_section
 from controller.loop.grasp import GraspConfig
 from controller.loop.positioning import LoopConfig
 from controller.service.config import ServiceConfig
@@ -24,7 +25,7 @@ from controller.teach.spacenav import TeachConfig
 from drivers.core.errors import ConfigError
 from drivers.core.typed_config import from_mapping, load_yaml_file
 from drivers.safety import SafetyLimits
-from sim_backend.cell.scene_config import SceneConfig
+from sim_backend.cell.scene_config import PartKind, SceneConfig
 
 
 @dataclass(frozen=True)
@@ -59,6 +60,14 @@ class PathsConfig:
 
 @dataclass(frozen=True)
 class ControllerConfig:
+    """Config section ``controller``.
+
+    part: the part this cell grasps, from the parts catalogue (``drivers.core.parts``: cube |
+    nut | ledge | screw); teach-in on a real cell takes its symmetry and grasp geometry from
+    there. On the simulated cell the part on the table (``scene.object.kind``) is taught.
+    """
+
+    part: PartKind = "cube"
     loop: LoopConfig = LoopConfig()
     grasp: GraspConfig = GraspConfig()
     acquisition: AcquisitionConfig = AcquisitionConfig()
@@ -91,15 +100,9 @@ class PerceptionConfig:
 
 
 @dataclass(frozen=True)
-class DeviceSection:
-    """A device backend chosen by ``type`` with that backend's typed options."""
-
-    type: str
-    options: Any
-
-
-@dataclass(frozen=True)
 class FineposConfig:
+    """The whole configuration: one field per section, and the file it came from."""
+
     arm: DeviceSection
     camera: DeviceSection
     wrench: DeviceSection
@@ -116,8 +119,6 @@ SECTIONS = ("arm", "camera", "wrench", "scene", "safety", "perception", "control
 
 def config_from_mapping(data: dict[str, Any], source: str = "<mapping>") -> FineposConfig:
     """Validate a whole root mapping (e.g. parsed YAML) into a FineposConfig."""
-    from controller.devices import parse_device_section
-
     unknown = sorted(str(k) for k in data if k not in SECTIONS)
     if unknown:
         raise ConfigError(f"{unknown[0]}: unknown section (allowed: {', '.join(SECTIONS)})")

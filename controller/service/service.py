@@ -285,9 +285,18 @@ class Service:
 
     # -- requests (called from connection threads) ---------------------------------------------
     def subscribe(self) -> Subscription:
+        """A new subscription to the event stream (state changes, iteration records)."""
         return self._hub.subscribe()
 
     def handle(self, request: Request) -> dict[str, Any]:
+        """The result of one validated request: a job command starts a job, the rest answer now.
+
+        A job command with ``wait`` returns once the job ended, else as soon as it started.
+
+        Raises:
+            RequestError: refused in this state (``busy``, ``fault``, ``not_ready``, ``stopping``),
+                arguments this cell cannot serve (``bad_request``), or a failed reset or reload.
+        """
         if request.cmd in JOB_COMMANDS:
             return self._start_job(request.cmd, request.args)
         handlers: dict[str, Callable[[], dict[str, Any]]] = {
@@ -301,6 +310,7 @@ class Service:
         return handlers[request.cmd]()
 
     def status(self) -> dict[str, Any]:
+        """The ``status`` answer: state, job, last pose, last iteration, model, fault, config."""
         with self._machine.lock:
             state, since, reason = self._machine.snapshot()
             seen = self._cell.arm.last_pose() if self._cell.arm is not None else None
@@ -338,10 +348,6 @@ class Service:
         simulated = self._cell.cell is not None
         if kind == "teach" and args["auto"] and not simulated:
             raise RequestError("bad_request", "teach auto needs the simulated cell")
-        if kind == "teach" and not args["auto"] and not simulated and \
-                (args["grasp_depth_mm"] is None or args["object_width_mm"] is None):
-            raise RequestError("bad_request", "teach on a real cell needs grasp_depth_mm and "
-                                              "object_width_mm")
         if kind == "position" and args["offset"] is not None and not simulated:
             raise RequestError("bad_request", "offset places the simulated arm; on a real cell "
                                               "the loop starts where the arm is")

@@ -93,9 +93,6 @@ def teach_with_spacenav(fp, *, start_offset: tuple[float, float, float] | None =
     elif start_offset is not None:
         raise FineposError("--start-offset places the simulated arm; on a real cell jog from "
                            "where the arm is")
-    elif grasp_depth_mm is None or object_width_mm is None:
-        raise FineposError("teach on a real cell needs --grasp-depth-mm and --object-width-mm "
-                           "(checked before jogging, not after)")
     with SpacenavClient(socket_path or cfg.socket_path) as client:
         return jog_and_record(fp, client, cfg, grasp_depth_mm=grasp_depth_mm,
                               object_width_mm=object_width_mm, timeout_s=timeout_s)

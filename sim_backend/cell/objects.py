@@ -1,4 +1,4 @@
-"""The toy construction-set parts the cell knows, in one explicit registry (``PARTS``).
+"""The geometry of the catalogue's parts (``drivers.core.parts``), in one registry (``PARTS``).
 
 Each part is meshed in its resting pose in a part frame whose origin lies on the table under
 the grasp point, z up; the jaws close along the part's y axis, so the nominal tool x axis is the
@@ -15,6 +15,8 @@ from functools import cached_property
 
 import numpy as np
 
+from drivers.core.parts import CUBE_EDGE_MM, SCREW_SHANK_RADIUS_MM, Part
+from drivers.core.parts import PARTS as CATALOGUE
 from drivers.core.pose import rot_y, rot_z
 from sim_backend.cell import meshes
 from sim_backend.cell.meshes import Mesh
@@ -40,23 +42,38 @@ class PartGeometry:
 
 @dataclass(frozen=True)
 class PartSpec:
-    """One kind of part.
+    """One kind of part in the simulated cell: its catalogue entry and its geometry.
 
-    kappa: rotational symmetry about the vertical (see the module docstring);
-    grasp_width_mm: finger width when the part is held;
-    grip_below_top_mm: how far below the part's top the fingertips go to grip it;
-    mass_g: for the weight the wrist sensor feels while the part is held;
-    color: the part's usual colour (RGB, 0..1), used for clutter;
+    part: the catalogue entry (kappa, grasp width and depth, jaw opening, mass, colour);
     build: makes the part's geometry (mm, part frame).
     """
 
-    kind: str
-    kappa: int
-    grasp_width_mm: float
-    grip_below_top_mm: float
-    mass_g: float
-    color: tuple[float, float, float]
+    part: Part
     build: Callable[[], PartGeometry]
+
+    @property
+    def kind(self) -> str:
+        return self.part.kind
+
+    @property
+    def kappa(self) -> int:
+        return self.part.kappa
+
+    @property
+    def grasp_width_mm(self) -> float:
+        return self.part.grasp_width_mm
+
+    @property
+    def grip_below_top_mm(self) -> float:
+        return self.part.grip_below_top_mm
+
+    @property
+    def mass_g(self) -> float:
+        return self.part.mass_g
+
+    @property
+    def color(self) -> tuple[float, float, float]:
+        return self.part.color
 
     @cached_property
     def geometry(self) -> PartGeometry:
@@ -75,9 +92,6 @@ class PartSpec:
     def footprint_radius_mm(self) -> float:
         """Largest horizontal distance of the part from its origin."""
         return float(np.hypot(self.mesh.vertices_mm[:, 0], self.mesh.vertices_mm[:, 1]).max())
-
-
-CUBE_EDGE_MM = 30.0
 
 
 def _cube() -> PartGeometry:
@@ -100,7 +114,6 @@ def _ledge() -> PartGeometry:
 
 
 SCREW_HEAD_RADIUS_MM = 10.5
-SCREW_SHANK_RADIUS_MM = 5.5
 SCREW_SHANK_LENGTH_MM = 32.0
 HEAD_HEIGHT_MM = 8.0
 
@@ -131,20 +144,8 @@ def _screw() -> PartGeometry:
          Cylinder(SCREW_SHANK_RADIUS_MM, SCREW_SHANK_LENGTH_MM, place @ shank)))
 
 
-# kappa and why, per part:
-#   cube 4: a cube (same from above after a quarter turn);
-#   nut 6: hexagonal;
-#   ledge 2: a bar with three holes (same after a half turn);
-#   screw 1: a round-headed screw lying on its side: the head is at one end, so its top view
-#   only repeats after a full turn (the shank alone would allow a half turn, the image doesn't).
-PARTS: dict[str, PartSpec] = {
-    "cube": PartSpec("cube", kappa=4, grasp_width_mm=CUBE_EDGE_MM, grip_below_top_mm=15.0,
-                     mass_g=15.0, color=(1.0, 0.85, 0.1), build=_cube),
-    "nut": PartSpec("nut", kappa=6, grasp_width_mm=24.0, grip_below_top_mm=7.0, mass_g=5.0,
-                    color=(0.85, 0.2, 0.15), build=_nut),
-    "ledge": PartSpec("ledge", kappa=2, grasp_width_mm=22.0, grip_below_top_mm=5.0,
-                      mass_g=8.0, color=(0.2, 0.55, 0.25), build=_ledge),
-    "screw": PartSpec("screw", kappa=1, grasp_width_mm=2.0 * SCREW_SHANK_RADIUS_MM,
-                      grip_below_top_mm=16.5, mass_g=4.0, color=(0.95, 0.45, 0.1),
-                      build=_screw),
+_BUILDERS: dict[str, Callable[[], PartGeometry]] = {
+    "cube": _cube, "nut": _nut, "ledge": _ledge, "screw": _screw,
 }
+PARTS: dict[str, PartSpec] = {kind: PartSpec(part, _BUILDERS[kind])
+                              for kind, part in CATALOGUE.items()}

@@ -30,7 +30,6 @@ PALM_HALF_MM = (22.0, 38.0, 17.0)
 FINGER_LENGTH_MM = 58.0
 FINGER_THICKNESS_MM = 8.0  # along the jaw axis (tool y)
 FINGER_DEPTH_MM = 16.0  # along tool x
-MAX_OPENING_MM = 40.0
 HOUSING_HALF_MM = (12.0, 12.0, 16.0)
 # Where the palm's underside (the fingers' root) is, in the tool frame.
 PALM_BOTTOM_IN_TOOL_MM = -FINGER_LENGTH_MM

@@ -15,7 +15,7 @@ from typing import Literal
 from drivers.core.errors import ConfigError
 from drivers.core.typed_config import from_mapping, load_yaml_file
 
-# Keep in step with sim_backend.cell.objects.PARTS (a test checks it).
+# Keep in step with the parts catalogue, drivers.core.parts.PARTS (a test checks it).
 PartKind = Literal["cube", "nut", "ledge", "screw"]
 TableTexture = Literal["none", "wood", "checker", "noise"]
 LightPreset = Literal["good", "poor", "dim", "side"]

@@ -20,18 +20,18 @@ from dataclasses import dataclass
 import numpy as np
 
 from drivers.core.errors import MotionRejectedError
+from drivers.core.parts import APPROACH_HEIGHT_MM
 from drivers.core.pose import Pose, rot_z, wrap_deg
 from sim_backend.cell import contact, hand_camera, meshes, puma260, robot_model, textures
 from sim_backend.cell.lighting import Light, resolve_light
 from sim_backend.cell.objects import PARTS, PartSpec
 from sim_backend.cell.pybullet_quiet import p
-from sim_backend.cell.robot_model import FINGER_LINKS, MAX_OPENING_MM, TOOL_LENGTH_MM
+from sim_backend.cell.robot_model import FINGER_LINKS, TOOL_LENGTH_MM
 from sim_backend.cell.scene_config import LightingConfig, SceneConfig, SimArmConfig
 from sim_backend.cell.shadows import ShadowMap
 
 logger = logging.getLogger(__name__)
 
-APPROACH_HEIGHT_MM = 35.0  # fingertips above the part's top at the pre-grasp pose
 REFERENCE_HEADING_DEG = 0.0  # tool x along world +x: the camera looks away from the robot
 TABLE_MIN_MM = (-250.0, -500.0)
 TABLE_MAX_MM = (850.0, 500.0)
@@ -166,7 +166,7 @@ class SimCell:
             self._labels[item.body_id] = item.label
         self._shadow_map = ShadowMap(cid, self._table_id)
         self._held: np.ndarray | None = None
-        self._finger_offset_mm = MAX_OPENING_MM / 2.0
+        self._finger_offset_mm = self.part.part.jaw_opening_mm / 2.0
         self._contacts: list[contact.Contact] | None = None
         obj = self.scene.object
         self._q_cmd = np.radians(_IK_SEED_DEG)
@@ -296,7 +296,7 @@ class SimCell:
     @property
     def grasp_depth_mm(self) -> float:
         """How far to descend along the approach axis from the nominal pose to grip the part."""
-        return APPROACH_HEIGHT_MM + self.part.grip_below_top_mm
+        return self.part.part.grasp_depth_mm
 
     @property
     def holding(self) -> bool:
@@ -456,7 +456,7 @@ class SimCell:
             rest = _translation(x, y, 0.0)
             rest[:3, :3] = rot_z(math.radians(phi))
             self._set_part_pose(rest)
-        self._set_fingers(MAX_OPENING_MM / 2.0)
+        self._set_fingers(self.part.part.jaw_opening_mm / 2.0)
         return self.finger_width_mm()
 
     def close_gripper(self) -> float:

@@ -13,6 +13,7 @@ from controller.devices import CellDevices
 from controller.fine_positioner import FinePositioner
 from controller.teach.spacenav import TeachAborted, jog_and_record, teach_with_spacenav
 from drivers.core.errors import ConfigError, FineposError
+from drivers.core.parts import PARTS
 from drivers.core.pose import ToolStep
 from drivers.safety import SafetyLimits
 from drivers.spacenav import ButtonEvent, MotionEvent
@@ -133,9 +134,14 @@ def test_teach_section_is_strict():
         config_from_mapping({"controller": {"teach": {"buttons": 2}}})
 
 
-def test_real_cell_needs_the_grasp_geometry_before_jogging(fp):
-    with pytest.raises(FineposError, match="--grasp-depth-mm and --object-width-mm"):
-        teach_with_spacenav(fp, socket_path="/nonexistent/spnav.sock")
+def test_real_cell_takes_the_grasp_geometry_from_the_parts_catalogue(fp):
+    state = fp.teach("current")
+    cube = PARTS["cube"]
+    assert (state.object_kind, state.kappa) == ("cube", 4)
+    assert state.grasp_depth_mm == cube.grasp_depth_mm == 50.0
+    assert state.object_width_mm == cube.grasp_width_mm
+    given = fp.teach("current", grasp_depth_mm=42.0, object_width_mm=29.0)
+    assert (given.grasp_depth_mm, given.object_width_mm) == (42.0, 29.0)
     with pytest.raises(FineposError, match="--start-offset places the simulated arm"):
         teach_with_spacenav(fp, start_offset=(1.0, 2.0, 3.0), grasp_depth_mm=50.0,
                             object_width_mm=25.0)

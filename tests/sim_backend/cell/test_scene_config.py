@@ -7,9 +7,9 @@ import typing
 import pytest
 
 from drivers.core.errors import ConfigError
+from drivers.core.parts import PARTS
 from drivers.core.typed_config import from_mapping
 from sim_backend.cell.lighting import PRESETS, resolve_light
-from sim_backend.cell.objects import PARTS
 from sim_backend.cell.scene_config import (
     LightingConfig,
     PartKind,
