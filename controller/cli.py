@@ -30,6 +30,7 @@ logger = logging.getLogger("finepos")
 
 
 def build_parser() -> argparse.ArgumentParser:
+    """The ``finepos`` argument parser, with every module in COMMAND_MODULES registered."""
     parser = argparse.ArgumentParser(
         prog="finepos",
         description="Calibration-free visual fine positioning for a camera-in-hand robot arm.",
@@ -54,6 +55,12 @@ def setup_logging(verbose: bool) -> None:
 
 
 def main(argv: list[str] | None = None) -> int:
+    """Parse ``argv`` (None: ``sys.argv[1:]``), set up logging and run the chosen subcommand.
+
+    Returns:
+        The exit status: the subcommand's (None counts as 0), 2 after a FineposError (printed as
+        ``finepos: error: ...``), 130 after Ctrl-C. Bad arguments make argparse exit with 2.
+    """
     parser = build_parser()
     args = parser.parse_args(argv)
     setup_logging(args.verbose)

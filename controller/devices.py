@@ -9,6 +9,7 @@ them is simulated) and closes everything it opened, in reverse order.
 from __future__ import annotations
 
 import contextlib
+import dataclasses
 from collections.abc import Callable
 from dataclasses import dataclass
 from typing import Any
@@ -16,10 +17,18 @@ from typing import Any
 from drivers.ati.config import AtiConfig
 from drivers.camera.config import OpenCvCameraConfig
 from drivers.core.errors import ConfigError
-from drivers.core.typed_config import from_mapping
+from drivers.core.typed_config import from_mapping, to_mapping
 from drivers.interfaces import Arm, Camera, WrenchSensor
 from drivers.val.config import ValConfig
 from sim_backend.cell.scene_config import SimArmConfig
+
+
+@dataclass(frozen=True)
+class DeviceSection:
+    """A device backend chosen by ``type`` with that backend's typed options."""
+
+    type: str
+    options: Any
 
 
 @dataclass(frozen=True)
@@ -29,6 +38,8 @@ class NoOptions:
 
 @dataclass(frozen=True)
 class Backend:
+    """One backend of a device kind: its options' type and how to build the device."""
+
     options: type
     build: Callable[[Any, Any], Any]  # (options, DeviceContext) -> device
 
@@ -56,9 +67,11 @@ class DeviceContext:
 
     @property
     def has_cell(self) -> bool:
+        """Whether a simulated cell was built."""
         return self._cell is not None
 
     def close(self) -> None:
+        """Close the simulated cell, if one was built."""
         self._stack.close()
 
 
@@ -114,9 +127,12 @@ REGISTRIES = {"arm": ARM_BACKENDS, "camera": CAMERA_BACKENDS, "wrench": WRENCH_B
 
 
 def parse_device_section(kind: str, data: Any):
-    """Validate ``{type: ..., <options>}`` for device ``kind`` (default: ``type: sim``)."""
-    from controller.config import DeviceSection
+    """Validate ``{type: ..., <options>}`` for device ``kind`` (default: ``type: sim``).
 
+    Raises:
+        ConfigError: an unknown ``type``, or options that backend does not take (naming the
+            key).
+    """
     registry = REGISTRIES[kind]
     data = {"type": "sim"} if data is None else data
     if not isinstance(data, dict):
@@ -128,6 +144,20 @@ def parse_device_section(kind: str, data: Any):
                           f"got {backend_type!r}")
     backend = registry[backend_type]
     return DeviceSection(backend_type, from_mapping(backend.options, options, kind))
+
+
+def with_device(config, kind: str, backend_type: str, **options):
+    """``config`` with device ``kind`` (arm, camera, wrench) on ``backend_type``.
+
+    ``options`` override that backend's options; the options already configured are kept when
+    the backend stays the same. The result is validated as strictly as a config file
+    (ConfigError naming the key).
+    """
+    section = getattr(config, kind)
+    data = to_mapping(section.options) if section.type == backend_type else {}
+    data.update(options)
+    replaced = parse_device_section(kind, {"type": backend_type, **data})
+    return dataclasses.replace(config, **{kind: replaced})
 
 
 @dataclass

@@ -14,7 +14,6 @@ from __future__ import annotations
 
 import argparse
 import contextlib
-import json
 import logging
 import os
 import time
@@ -24,7 +23,7 @@ from pathlib import Path
 import numpy as np
 
 from drivers.core.errors import ConfigError
-from drivers.core.files import atomic_write_text
+from drivers.core.files import write_json
 from drivers.core.pose import ToolStep
 from drivers.safety import SafetyLimits
 from sim_backend.cell.scene_config import SceneConfig, load_scene
@@ -100,9 +99,7 @@ def run(args: argparse.Namespace) -> int:
     median = results["look_and_move_ms"]["median"]
     results["target_look_and_move_ms"] = TARGET_LOOK_AND_MOVE_MS
     results["meets_target"] = median < TARGET_LOOK_AND_MOVE_MS
-    text = json.dumps(results, indent=2)
-    print(text)
+    write_json(args.json, results)
     if args.json:
-        atomic_write_text(args.json, text + "\n")
         logger.info("wrote %s", args.json)
     return 0

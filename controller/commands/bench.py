@@ -13,4 +13,5 @@ LEAVES = {
 
 
 def register(subparsers) -> None:
+    """Add ``finepos bench`` with one leaf per LEAVES entry."""
     register_group(subparsers, "bench", "benchmarks that print JSON", LEAVES)

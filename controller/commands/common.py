@@ -4,7 +4,6 @@ from __future__ import annotations
 
 import argparse
 import contextlib
-import json
 import sys
 import time
 from pathlib import Path
@@ -12,7 +11,6 @@ from pathlib import Path
 from controller.config import load_config
 from controller.loop.iteration_log import IterationLog
 from drivers.core.errors import ConfigError
-from drivers.core.files import atomic_write_text
 
 
 def positive_int(text: str) -> int:
@@ -52,17 +50,24 @@ def add_config_option(parser: argparse.ArgumentParser) -> None:
 
 
 def add_log_option(parser: argparse.ArgumentParser) -> None:
+    """``--log FILE``: the per-iteration JSON Lines log (default: a new file in log_dir)."""
     parser.add_argument("--log", metavar="FILE",
                         help="per-iteration JSON Lines log (default: a new file in "
                              "controller.paths.log_dir)")
 
 
 def config_from_args(args):
+    """The config of ``--config`` (all defaults without it); raises ConfigError naming the key."""
     return load_config(getattr(args, "config", None))
 
 
 @contextlib.contextmanager
 def iteration_log(args, config):
+    """Context manager: the IterationLog at ``--log``, closed when the block ends.
+
+    Without ``--log`` it is a new ``iterations-YYYYmmdd-HHMMSS.jsonl`` in
+    ``controller.paths.log_dir``. The path is printed on stderr.
+    """
     path = getattr(args, "log", None)
     if path is None:
         stamp = time.strftime("%Y%m%d-%H%M%S")
@@ -84,10 +89,3 @@ def parse_triple(text: str, what: str) -> tuple[float, float, float]:
                           f"got {text!r}")
     return values  # type: ignore[return-value]
 
-
-def write_json(path: str | Path | None, data: dict) -> None:
-    """Print ``data`` as JSON and, when a path is given, write it there atomically."""
-    text = json.dumps(data, indent=2)
-    print(text)
-    if path:
-        atomic_write_text(path, text + "\n")

@@ -24,7 +24,7 @@ DEFAULT_SOCKET = ServiceConfig.socket_path
 LEAVES = {
     "status": ("finepos ctl status", "state, pose, job, last iteration, model in use, fault"),
     "teach": ("finepos ctl teach --auto", "record the nominal pose (--auto: simulated cell; "
-              "otherwise the arm's current pose, with --grasp-depth-mm and --object-width-mm)"),
+              "otherwise the arm's current pose, for controller.part)"),
     "acquire": ("finepos ctl acquire --set nn1", "take a training or test set"),
     "train": ("finepos ctl train --system gabor", "train a model from nn1 and nn2"),
     "position": ("finepos ctl position --offset 12,-8,20", "run the positioning loop"),
@@ -60,6 +60,7 @@ def _request_args(args, specs: dict[str, Arg]) -> dict:
 
 
 def cmd_ctl(args) -> int:
+    """Send one command and print the result as JSON; 1 for an error or a job not ``done``."""
     with _client(args) as client:
         if args.ctl_command == "stream":
             return _stream(client, args.count)
@@ -95,6 +96,7 @@ def _add_option(parser: argparse.ArgumentParser, name: str, spec: Arg) -> None:
 
 
 def register(subparsers) -> None:
+    """Add ``finepos ctl`` with one leaf per control command (options from COMMANDS)."""
     p = subparsers.add_parser(
         "ctl", help="command a running `finepos serve` over its control socket",
         description="Example: finepos ctl status\n\nSend one command to the service and print "

@@ -20,6 +20,15 @@ LIGHTINGS = ("good", "poor")
 
 
 def table_markdown(reports: dict[str, dict]) -> str:
+    """Markdown: RMS error and safe rate per lighting and loop budget, then one line per lighting.
+
+    The per-lighting lines give loops to a safe grasp (median, p95), grasp success and the
+    median time per loop.
+
+    Args:
+        reports: per lighting, a ``metrics.summarise`` report with ``grasp_success_rate`` (0..1)
+            and ``seconds_per_loop`` added.
+    """
     budgets = ("0.5", "1.0", "1.5", "2.5", "3.5", "6.5")
     lines = ["| lighting | loops | x RMS [mm] | y RMS [mm] | phi RMS [deg] | safe |",
              "|---|---|---|---|---|---|"]
@@ -44,6 +53,7 @@ def table_markdown(reports: dict[str, dict]) -> str:
 
 
 def cmd_demo(args) -> int:
+    """Teach, acquire, train and evaluate gabor in good and poor light; write all to ``--out``."""
     config = config_from_args(args)
     out = Path(args.out)
     out.mkdir(parents=True, exist_ok=True)
@@ -78,6 +88,7 @@ def cmd_demo(args) -> int:
 
 
 def register(subparsers) -> None:
+    """Add ``finepos demo``."""
     p = subparsers.add_parser(
         "demo", help="the whole job on the simulated cell: teach, acquire, train, evaluate",
         description="Example: finepos demo --out out/demo\n\nAuto-teach, acquire the NN1 and "

@@ -6,11 +6,11 @@ from __future__ import annotations
 
 import argparse
 
-from controller.device_overrides import with_device
-from controller.devices import ARM_BACKENDS, WRENCH_BACKENDS
+from controller.devices import ARM_BACKENDS, WRENCH_BACKENDS, with_device
 
 
 def add_device_options(parser: argparse.ArgumentParser) -> None:
+    """Add the ``devices`` group: ``--arm/--port``, ``--camera``, ``--wrench/--wrench-port``."""
     group = parser.add_argument_group(
         "devices", "override the config's arm, camera and wrench sections, e.g. --arm val "
                    "--port /dev/pts/3 --wrench ati --wrench-port /dev/pts/4 --camera "

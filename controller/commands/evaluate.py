@@ -6,13 +6,15 @@ import argparse
 import json
 from pathlib import Path
 
-from controller.commands.common import add_config_option, config_from_args, positive_int, write_json
+from controller.commands.common import add_config_option, config_from_args, positive_int
 from controller.evaluation.trials import evaluate
 from controller.loop.iteration_log import IterationLog
 from controller.systems.registry import SYSTEMS
+from drivers.core.files import write_json
 
 
 def cmd_evaluate(args) -> int:
+    """Run ``trials.evaluate`` with the options and print the JSON report (also to ``--json``)."""
     config = config_from_args(args)
     log = IterationLog(args.log) if args.log else None
     try:
@@ -31,6 +33,7 @@ def cmd_evaluate(args) -> int:
 
 
 def register(subparsers) -> None:
+    """Add ``finepos evaluate``."""
     p = subparsers.add_parser(
         "evaluate", help="evaluate a system on random placements; JSON report",
         description="Example: finepos evaluate --system gabor --lighting poor --trials 100 "

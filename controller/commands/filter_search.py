@@ -14,6 +14,7 @@ from controller.evaluation.comparison.filter_sets import FILTER_SETS, PAPER_SET,
 
 
 def cmd_filter_search(args) -> int:
+    """Run the filter-set search, write its files to ``--out``, print the Markdown summary."""
     config = config_from_args(args)
     names = [n.strip() for n in args.sets.split(",") if n.strip()] if args.sets else None
     sets = select_sets(names)
@@ -28,6 +29,7 @@ def cmd_filter_search(args) -> int:
 
 
 def register(subparsers) -> None:
+    """Add ``finepos filter-search``."""
     p = subparsers.add_parser(
         "filter-search", help="the paper's Fig. 5: compare Gabor filter sets (mean and spread)",
         description="Example: finepos filter-search --repeats 10 --trials 20 --out out/fig5\n\n"

@@ -13,6 +13,11 @@ import importlib
 
 
 def register_group(subparsers, name: str, help_text: str, leaves: dict[str, str]) -> None:
+    """Add command group ``name`` with one leaf per ``leaves`` entry (leaf name -> module name).
+
+    Each leaf gets its module's ``add_arguments`` options and ``run`` as ``func``; its help is the
+    module docstring's first line, its description the docstring with the ``Example:`` line first.
+    """
     group = subparsers.add_parser(name, help=help_text, description=help_text)
     sub = group.add_subparsers(dest=f"{name}_command", metavar="COMMAND", required=True)
     for leaf, module_name in leaves.items():

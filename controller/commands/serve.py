@@ -12,6 +12,7 @@ from controller.service.signals import service_signals
 
 
 def cmd_serve(args) -> int:
+    """Run the service until SIGTERM (SIGHUP reloads); returns its exit status."""
     config = load_config(args.config)
     notifier = Notifier()
     try:
@@ -25,6 +26,7 @@ def cmd_serve(args) -> int:
 
 
 def register(subparsers) -> None:
+    """Add ``finepos serve``."""
     p = subparsers.add_parser(
         "serve", help="run the controller service (control socket, systemd notify)",
         description="Example: finepos serve --config deploy/finepos.yaml --socket /tmp/fp.sock"

@@ -12,4 +12,5 @@ LEAVES = {
 
 
 def register(subparsers) -> None:
+    """Add ``finepos sim`` with one leaf per LEAVES entry."""
     register_group(subparsers, "sim", "the simulated work cell and device emulators", LEAVES)

@@ -12,6 +12,7 @@ from controller.evaluation.comparison.table1_report import table1_markdown, writ
 
 
 def cmd_table1(args) -> int:
+    """Run Table 1, write its files to ``--out`` and print the Markdown table."""
     config = config_from_args(args)
     result = run_table1(config, trials=args.trials, seed=args.seed, workers=args.workers,
                         systems=TABLE1_SYSTEMS, lightings=LIGHTINGS, grasp=not args.no_grasp,
@@ -24,6 +25,7 @@ def cmd_table1(args) -> int:
 
 
 def register(subparsers) -> None:
+    """Add ``finepos table1``."""
     p = subparsers.add_parser(
         "table1", help="the paper's Table 1: gabor, pca and hough in good and poor light",
         description="Example: finepos table1 --trials 100 --seed 1 --out out/table1\n\n"

@@ -11,7 +11,6 @@ from controller.commands.common import (
     iteration_log,
     loop_budget,
     parse_triple,
-    write_json,
 )
 from controller.commands.device_options import add_device_options, apply_device_options
 from controller.devices import open_devices
@@ -19,6 +18,7 @@ from controller.fine_positioner import DATASETS, FinePositioner
 from controller.systems.registry import SYSTEMS
 from controller.teach.spacenav import DEFAULT_SIM_START_OFFSET, TeachAborted, teach_with_spacenav
 from drivers.core.errors import ConfigError
+from drivers.core.files import write_json
 from drivers.core.pose import ToolStep
 
 _SPACENAV_ONLY = ("start_offset", "spnav_socket", "timeout_s")
@@ -34,6 +34,7 @@ def _positioner(args, devices, config, log=None) -> FinePositioner:
 
 
 def cmd_teach(args) -> int:
+    """Record the nominal pose (auto, spacenav or current); 1 when a spacenav teach-in aborts."""
     config = _config(args)
     given = [f"--{name.replace('_', '-')}" for name in _SPACENAV_ONLY
              if getattr(args, name) is not None]
@@ -64,6 +65,7 @@ def cmd_teach(args) -> int:
 
 
 def cmd_acquire(args) -> int:
+    """Take the ``--set`` dataset around the taught pose and print where it is stored."""
     config = _config(args)
     with open_devices(config) as devices:
         fp = _positioner(args, devices, config)
@@ -75,6 +77,7 @@ def cmd_acquire(args) -> int:
 
 
 def cmd_train(args) -> int:
+    """Train ``--system`` from the nn1 and nn2 datasets and print the model file."""
     config = config_from_args(args)
     fp = FinePositioner(None, config, state_dir=args.state_dir)
     model = fp.train(args.system)
@@ -85,6 +88,7 @@ def cmd_train(args) -> int:
 
 
 def cmd_position(args) -> int:
+    """Run the positioning loop (then ``--grasp``); 1 unless it converged or used its budget."""
     config = _config(args)
     offset = parse_triple(args.offset, "--offset") if args.offset is not None else None
     with open_devices(config) as devices, iteration_log(args, config) as log:
@@ -105,6 +109,7 @@ def cmd_position(args) -> int:
 
 
 def cmd_grasp(args) -> int:
+    """Run the force-guarded grasp from the current pose; 1 when it failed."""
     config = _config(args)
     with open_devices(config) as devices:
         result = _positioner(args, devices, config).grasp()
@@ -113,6 +118,7 @@ def cmd_grasp(args) -> int:
 
 
 def register(subparsers) -> None:
+    """Add ``finepos teach``, ``acquire``, ``train``, ``position`` and ``grasp``."""
     p = subparsers.add_parser(
         "teach", help="record the nominal grasp pose into the cell's state file",
         description="Example: finepos teach --auto\n\nRecord the nominal pre-grasp pose. "
@@ -127,8 +133,10 @@ def register(subparsers) -> None:
     how = p.add_mutually_exclusive_group()
     how.add_argument("--auto", action="store_true", help="simulated cell: the true pose")
     how.add_argument("--device", choices=["spacenav"], help="jog with a 3D mouse")
-    p.add_argument("--grasp-depth-mm", type=float, help="descent from the pose to grip")
-    p.add_argument("--object-width-mm", type=float, help="finger width when holding the part")
+    p.add_argument("--grasp-depth-mm", type=float,
+                   help="descent from the pose to grip (default: the part's, controller.part)")
+    p.add_argument("--object-width-mm", type=float,
+                   help="finger width when holding the part (default: the part's)")
     default_offset = ",".join(f"{v:g}" for v in DEFAULT_SIM_START_OFFSET)
     p.add_argument("--start-offset", metavar="DX,DY,DPHI",
                    help="spacenav on the simulated cell: start this far from the grasp pose "

@@ -24,8 +24,7 @@ import contextlib
 import dataclasses
 from collections.abc import Iterator
 
-from controller.device_overrides import with_device
-from controller.devices import CellDevices, open_devices
+from controller.devices import CellDevices, open_devices, with_device
 from sim_backend.cell.scene_config import SimArmConfig
 from sim_backend.emulators.cell import DEFAULT_FPS, CellEmulators
 

@@ -29,6 +29,7 @@ def state_at(states: Sequence[LoopState], budget: float) -> LoopState:
 
 
 def is_safe(error: tuple[float, float, float]) -> bool:
+    """Whether an error (x mm, y mm, phi deg) is within SAFE_MM (x-y distance) and SAFE_DEG."""
     return math.hypot(error[0], error[1]) <= SAFE_MM and abs(error[2]) <= SAFE_DEG
 
 

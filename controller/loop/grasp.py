@@ -64,6 +64,7 @@ class GraspResult:
     held_weight_n: float | None = None
 
     def as_dict(self) -> dict:
+        """The result as a JSON-able dict, without the ``forces_n`` trace."""
         return {"success": self.success, "reason": self.reason, "depth_mm": self.depth_mm,
                 "width_mm": self.width_mm, "max_force_n": self.max_force_n,
                 "retreated": self.retreated, "held_weight_n": self.held_weight_n}

@@ -33,10 +33,12 @@ class Guard:
 
 
 def value_of(wrench: Wrench, quantity: Quantity) -> float:
+    """The reading's ``quantity`` (N or N*m; ``force_n``: the force vector's magnitude)."""
     return wrench.force_n if quantity == "force_n" else getattr(wrench, quantity)
 
 
 def tripped(guard: Guard, wrench: Wrench) -> bool:
+    """Whether ``wrench`` trips ``guard`` (strictly beyond its limit)."""
     v = value_of(wrench, guard.quantity)
     if guard.op == ">":
         return v > guard.limit

@@ -67,6 +67,13 @@ class IterationLog:
         return unsubscribe
 
     def write(self, record: dict[str, Any]) -> None:
+        """Append ``record`` as one line (flushed, fsynced unless disabled), then tell subscribers.
+
+        Subscribers get the record as read back from JSON, in the writing thread.
+
+        Raises:
+            ValueError: the log is closed.
+        """
         line = to_json_line(record)
         with self._lock:
             if self._file.closed:
@@ -81,6 +88,7 @@ class IterationLog:
             callback(plain)
 
     def close(self) -> None:
+        """Close the file; safe to call twice. Later writes raise ValueError."""
         with self._lock:
             if not self._file.closed:
                 self._file.close()

@@ -24,8 +24,9 @@ Commands (arguments, types, ranges and defaults in ``commands.COMMANDS``):
   iteration record), model (system, file, train images), fault (reason, since, devices not
   active, reconnected, reconnect_attempts), config (source, last_reload), iteration_log, clients;
 - jobs, refused unless idle (``busy``, ``fault``, ``not_ready``, ``stopping``): ``teach``
-  (``auto``: simulated cell only; otherwise the current pose, needing ``grasp_depth_mm`` and
-  ``object_width_mm`` on a real cell), ``acquire`` (``set``: nn1 | nn2 | test, ``seed``),
+  (``auto``: simulated cell only; otherwise the current pose, with the grasp geometry of
+  ``controller.part`` unless ``grasp_depth_mm`` and ``object_width_mm`` are given),
+  ``acquire`` (``set``: nn1 | nn2 | test, ``seed``),
   ``train`` (``system``), ``position`` (``max_loops``; ``offset`` [dx_mm, dy_mm, dphi_deg]:
   simulated cell only), ``grasp``. Each takes ``wait``: false (default) answers when the job has
   started, true when it has ended; the job's ``outcome`` is done, failed (the reason says why,

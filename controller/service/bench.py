@@ -26,9 +26,9 @@ import time
 from collections import defaultdict
 from pathlib import Path
 
-from controller.commands.common import write_json
 from controller.loop.iteration_log import read_log
 from controller.service.client import ServiceClient
+from drivers.core.files import write_json
 
 OFFSETS = ((12.0, -8.0, 20.0), (-15.0, 10.0, -25.0), (8.0, 14.0, 10.0), (-10.0, -12.0, -15.0))
 START_TIMEOUT_S = 120.0
@@ -36,6 +36,7 @@ STOP_TIMEOUT_S = 10.0
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
+    """Add ``--json``, ``--clients`` and ``--runs``."""
     parser.add_argument("--json", metavar="OUT", help="also write the report here")
     parser.add_argument("--clients", type=int, default=8, help="concurrent status clients")
     parser.add_argument("--runs", type=int, default=3,
@@ -138,6 +139,7 @@ def _measure(work: Path, clients: int, runs: int) -> dict:
 
 
 def run(args: argparse.Namespace) -> int:
+    """Measure in a temporary folder and print the JSON report (also to ``--json``)."""
     with tempfile.TemporaryDirectory(prefix="finepos-bench-service-") as tmp:
         report = _measure(Path(tmp), args.clients, args.runs)
     write_json(args.json, report)

@@ -32,6 +32,7 @@ class CellConnection:
 
     @property
     def is_open(self) -> bool:
+        """Whether the devices are open (``open`` succeeded, ``close`` not called since)."""
         return self._devices is not None
 
     def open(self) -> None:
@@ -60,6 +61,11 @@ class CellConnection:
         return self._devices.cell if self._devices is not None else None
 
     def named(self) -> list[tuple[str, Device]]:
+        """The arm (unwrapped), camera and wrench sensor with their names.
+
+        Raises:
+            DeviceNotConnectedError: the devices are not open.
+        """
         devices = self._require()
         return [("arm", devices.arm), ("camera", devices.camera), ("wrench", devices.wrench)]
 

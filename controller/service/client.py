@@ -56,6 +56,7 @@ class ServiceClient:
             self.call("auth", token=token)
 
     def close(self) -> None:
+        """Close the connection to the service."""
         self._file.close()
         self._sock.close()
 

@@ -40,9 +40,17 @@ AUTH_TIMEOUT_S = 10.0  # a TCP connection that has not authenticated by then is 
 class RequestHandler(Protocol):
     """What a connection needs from the service."""
 
-    def handle(self, request: Request) -> dict[str, Any]: ...
+    def handle(self, request: Request) -> dict[str, Any]:
+        """The result of one validated request (``stream`` and ``auth`` never get here).
 
-    def subscribe(self) -> Subscription: ...
+        Raises:
+            RequestError: the request is refused or fails; its code goes into the error response.
+        """
+        ...
+
+    def subscribe(self) -> Subscription:
+        """A new event subscription for a ``stream`` connection (which closes it)."""
+        ...
 
 
 class Connection:
@@ -61,6 +69,7 @@ class Connection:
             sock.settimeout(AUTH_TIMEOUT_S)
 
     def serve(self) -> None:
+        """Answer requests until the client or the server ends the connection."""
         try:
             self._serve()
         except OSError as exc:  # the client went away mid-write, or the server shut us down

@@ -25,6 +25,7 @@ class Subscription:
         self._lock = threading.Lock()
 
     def put(self, event: dict[str, Any]) -> None:
+        """Queue ``event`` without blocking; when the queue is full, drop and count it."""
         try:
             self._queue.put_nowait(event)
         except queue.Full:
@@ -32,6 +33,11 @@ class Subscription:
                 self._dropped += 1
 
     def get(self, timeout_s: float) -> dict[str, Any] | None:
+        """The next event, or None when none arrives within ``timeout_s``.
+
+        If events were dropped since the last call, it first returns ``{"event": "dropped",
+        "count": N}``.
+        """
         with self._lock:
             dropped, self._dropped = self._dropped, 0
         if dropped:
@@ -42,6 +48,7 @@ class Subscription:
             return None
 
     def close(self) -> None:
+        """Unsubscribe from the hub: no further events are queued."""
         self._hub.unsubscribe(self)
 
 
@@ -54,17 +61,20 @@ class EventHub:
         self._lock = threading.Lock()
 
     def subscribe(self) -> Subscription:
+        """A new subscription that receives every event published from now on."""
         subscription = Subscription(self, self._queue_events)
         with self._lock:
             self._subscribers.append(subscription)
         return subscription
 
     def unsubscribe(self, subscription: Subscription) -> None:
+        """Stop delivering to ``subscription`` (nothing happens if it is not subscribed)."""
         with self._lock:
             if subscription in self._subscribers:
                 self._subscribers.remove(subscription)
 
     def publish(self, event: dict[str, Any]) -> None:
+        """Queue ``event`` for every subscriber; never blocks (a full queue drops it)."""
         with self._lock:
             subscribers = list(self._subscribers)
         for subscription in subscribers:

@@ -40,6 +40,7 @@ class PreemptibleArm:
         self._preempted.set()
 
     def resume(self) -> None:
+        """Accept motion commands again after ``preempt`` (called as each job starts)."""
         self._preempted.clear()
 
     def last_pose(self) -> tuple[Pose, float] | None:
@@ -70,42 +71,63 @@ class PreemptibleArm:
     # -- the Arm's public methods ------------------------------------------------------------
     @property
     def state(self) -> Lifecycle:
+        """The wrapped arm's lifecycle state."""
         return self.inner.state
 
     @property
     def fault_reason(self) -> str | None:
+        """Why the wrapped arm is in FAULT (None otherwise)."""
         return self.inner.fault_reason
 
     @property
     def limits(self) -> SafetyLimits | None:
+        """The wrapped arm's safety limits (None: motions are not checked)."""
         return self.inner.limits
 
     def pose(self) -> Pose:
+        """Current tool pose (mm, deg), read from the arm and kept as the last pose."""
         return self._seen(self._run(self.inner.pose))
 
     def tool_rotation_deg(self) -> float:
+        """Rotation of the tool about its approach axis, deg (a fresh pose reading)."""
         return self.pose().approach_rotation_deg
 
     def move_to(self, target: Pose) -> Motion:
+        """Absolute Cartesian move to ``target``; returns what was done and keeps the pose reached.
+
+        Raises:
+            MotionRejectedError: ``aborted`` after ``preempt`` (nothing sent), or the arm
+                refused it.
+        """
         motion = self._move(lambda: self.inner.move_to(target))
         self._seen(motion.pose)
         return motion
 
     def move_tool(self, step: ToolStep) -> Motion:
+        """Relative move in the current tool frame; returns what was done, keeps the pose reached.
+
+        Raises:
+            MotionRejectedError: ``aborted`` after ``preempt`` (nothing sent), or the arm
+                refused it.
+        """
         motion = self._move(lambda: self.inner.move_tool(step))
         self._seen(motion.pose)
         return motion
 
     def set_speed(self, percent: float) -> None:
+        """Monitor speed in percent, 0 < percent <= 100 (refused after ``preempt``)."""
         self._move(lambda: self.inner.set_speed(percent))
 
     def open_gripper(self) -> float:
+        """Open the jaws; returns the finger width in mm (refused after ``preempt``)."""
         return self._move(self.inner.open_gripper)
 
     def close_gripper(self) -> float:
+        """Close the jaws; returns the finger width in mm (refused after ``preempt``)."""
         return self._move(self.inner.close_gripper)
 
     def finger_width_mm(self) -> float:
+        """Current distance between the fingers, mm (also after ``preempt``)."""
         return self._run(self.inner.finger_width_mm)
 
     def halt(self) -> None:

@@ -70,6 +70,7 @@ class Job:
             return True
 
     def report(self) -> dict[str, Any]:
+        """The job as ``status`` shows it; outcome, reason, result and seconds once it is done."""
         report = {"id": self.id, "kind": self.kind, "args": self.args,
                   "started_at": self.started_at}
         if self.done.is_set():
@@ -80,6 +81,8 @@ class Job:
 
 @dataclass(frozen=True)
 class JobContext:
+    """What a job body gets: the FinePositioner, the validated arguments, the model slot."""
+
     fp: FinePositioner
     args: dict[str, Any]
     models: ModelSlot

@@ -26,6 +26,8 @@ _CRED = struct.Struct("3i")  # struct ucred: pid, uid, gid
 
 @dataclass(frozen=True)
 class PeerCredentials:
+    """A connected process's pid, uid, gid and supplementary groups (kernel-recorded)."""
+
     pid: int
     uid: int
     gid: int
@@ -42,6 +44,11 @@ def peer_credentials(sock: socket.socket) -> PeerCredentials:
 
 
 def resolve_uid(user: int | str) -> int:
+    """The uid of a user given by number or name.
+
+    Raises:
+        ConfigError: (``service.allowed_users``) no user of that name on this system.
+    """
     if isinstance(user, int):
         return user
     if user.isdigit():
@@ -53,6 +60,11 @@ def resolve_uid(user: int | str) -> int:
 
 
 def resolve_gid(group: int | str, key: str = "service.allowed_groups") -> int:
+    """The gid of a group given by number or name; ``key`` is the config key errors name.
+
+    Raises:
+        ConfigError: no group of that name on this system.
+    """
     if isinstance(group, int):
         return group
     if group.isdigit():
@@ -72,6 +84,11 @@ class PeerPolicy:
 
     @classmethod
     def from_config(cls, users: Iterable[int | str], groups: Iterable[int | str]) -> PeerPolicy:
+        """The policy allowing the service's effective uid, ``users`` and members of ``groups``.
+
+        Raises:
+            ConfigError: a user or group name does not exist on this system.
+        """
         return cls(frozenset({os.geteuid(), *(resolve_uid(u) for u in users)}),
                    frozenset(resolve_gid(g) for g in groups))
 

@@ -109,15 +109,18 @@ def parse_request(data: Any) -> Request:
 
 
 def ok_line(request_id_: str | int | None, result: dict[str, Any]) -> bytes:
+    """The success response line (newline-terminated bytes) carrying ``result``."""
     return (to_json_line({"id": request_id_, "ok": True, "result": result}) + "\n").encode()
 
 
 def error_line(request_id_: str | int | None, code: str, message: str) -> bytes:
+    """The error response line (newline-terminated bytes); ``code`` is one of ERROR_CODES."""
     return (to_json_line({"id": request_id_, "ok": False,
                           "error": {"code": code, "message": message}}) + "\n").encode()
 
 
 def event_line(event: dict[str, Any]) -> bytes:
+    """One stream event as a newline-terminated JSON line (bytes)."""
     return (to_json_line(event) + "\n").encode()
 
 

@@ -40,18 +40,23 @@ class Notifier:
             logger.debug("sd_notify %s: %s", fields, exc)
 
     def ready(self, status: str) -> None:
+        """Tell systemd that start-up is complete (READY=1), with a status line."""
         self.notify("READY=1", _status(status))
 
     def status(self, status: str) -> None:
+        """Set the status line systemd shows for the service (STATUS=)."""
         self.notify(_status(status))
 
     def watchdog(self) -> None:
+        """Ping the systemd watchdog (WATCHDOG=1)."""
         self.notify("WATCHDOG=1")
 
     def stopping(self, status: str) -> None:
+        """Tell systemd that shutdown has begun (STOPPING=1), with a status line."""
         self.notify("STOPPING=1", _status(status))
 
     def close(self) -> None:
+        """Close the notification socket; later calls send nothing. Safe to call twice."""
         if self._socket is not None:
             self._socket.close()
             self._socket = None

@@ -50,10 +50,18 @@ class ControlServer:
 
     @property
     def client_count(self) -> int:
+        """The number of connections being served now."""
         with self._lock:
             return len(self._connections)
 
     def start(self) -> ControlServer:
+        """Bind the UNIX socket (and the TCP listener if configured), start accepting; returns self.
+
+        Raises:
+            ListenerError: the socket path is not a socket, or another service answers on it.
+            ConfigError: ``service.socket_group`` names no group on this system.
+            OSError: a socket cannot be bound (e.g. the TCP port is in use).
+        """
         group = self.config.socket_group
         gid = resolve_gid(group, "service.socket_group") if group is not None else None
         sock, self._inode = bind_unix(self.socket_path, gid)

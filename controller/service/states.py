@@ -17,6 +17,8 @@ from drivers.core.errors import FineposError
 
 
 class State(enum.Enum):
+    """The service's states; the value is the name ``status`` and state events report."""
+
     STARTING = "starting"
     IDLE = "idle"
     TEACHING = "teaching"
@@ -69,6 +71,7 @@ class StateMachine:
 
     @property
     def state(self) -> State:
+        """The current state (read without the lock)."""
         return self._state
 
     def snapshot(self) -> tuple[State, float, str]:

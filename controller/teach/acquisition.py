@@ -83,4 +83,12 @@ def grid_for(grid_cfg, kappa: int) -> np.ndarray:
 
 
 def random_set(rng: np.random.Generator, n: int, a_mm: float, kappa: int) -> np.ndarray:
+    """``n`` random displacements (dx_mm, dy_mm, dphi_deg), uniform in +/-a_mm and +/-180/kappa deg.
+
+    Returns:
+        An (n, 3) array, in drawing order (not serpentine).
+
+    Raises:
+        DatasetError: n < 1 or a_mm < 0.
+    """
     return random_offsets(rng, n, a_mm, 180.0 / max(kappa, 1))

@@ -42,6 +42,7 @@ class CellState:
     taught_at: float
 
     def save(self, path: str | Path) -> None:
+        """Write the state to ``path`` atomically as JSON, with the format version."""
         data = asdict(self)
         data["nominal_pose"] = self.nominal_pose.as_dict()
         data["version"] = STATE_VERSION
@@ -49,6 +50,11 @@ class CellState:
 
     @classmethod
     def load(cls, path: str | Path) -> CellState:
+        """Read a state file written by ``save``.
+
+        Raises:
+            StateError: the file is missing, unreadable, of another version or malformed.
+        """
         path = Path(path)
         try:
             data = json.loads(path.read_text(encoding="utf-8"))
@@ -69,4 +75,5 @@ class CellState:
 
     @staticmethod
     def now() -> float:
+        """The current UNIX time (``taught_at`` of a new teach-in)."""
         return time.time()

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import json
 import os
 import tempfile
 from pathlib import Path
@@ -38,3 +39,12 @@ def atomic_write_bytes(path: str | Path, data: bytes) -> None:
 
 def atomic_write_text(path: str | Path, text: str) -> None:
     atomic_write_bytes(path, text.encode("utf-8"))
+
+
+def write_json(path: str | Path | None, data: dict) -> None:
+    """Print ``data`` as JSON (a report on stdout) and, when a path is given, write it there
+    atomically."""
+    text = json.dumps(data, indent=2)
+    print(text)
+    if path:
+        atomic_write_text(path, text + "\n")

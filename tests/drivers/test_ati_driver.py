@@ -42,10 +42,10 @@ def assert_close(w: Wrench, expected: Wrench) -> None:
         assert value == pytest.approx(getattr(expected, name), abs=resolution), name
 
 
-@pytest.mark.parametrize("tcp_port", [None, 0], ids=["pty", "tcp"])
-def test_driver_meets_wrench_contract(tcp_port):
-    with FakeWrenchSensor(lambda: LOAD) as backing, \
-            AtiEmulator(backing, tcp_port=tcp_port) as emu:
+def test_driver_meets_wrench_contract_over_a_socket_url():
+    # (over a pty: the backend contract test, tests/controller/test_backend_contract.py)
+    with FakeWrenchSensor(lambda: LOAD) as backing, AtiEmulator(backing, tcp_port=0) as emu:
+        assert emu.url.startswith("socket://127.0.0.1:")
         check_wrench(lambda: make_sensor(emu))
 
 

@@ -43,10 +43,6 @@ def make_arm(url: str, **overrides) -> ValArm:
     return ValArm(ValConfig(port=url, **overrides), LIMITS)
 
 
-def test_contract_over_pty(emulator):
-    check_arm(lambda: make_arm(emulator.url))
-
-
 @pytest.mark.skipif("FINEPOS_VAL_PORT" not in os.environ,
                     reason="real-hardware test: set FINEPOS_VAL_PORT to the controller's port URL "
                            "(the arm moves a few mm and works the gripper)")

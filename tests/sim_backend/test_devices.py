@@ -5,10 +5,8 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from drivers.contract import check_arm, check_camera, check_wrench
 from drivers.core.errors import DeviceFaultError, MotionRejectedError
 from drivers.core.pose import ToolStep
-from drivers.safety import SafetyLimits
 from sim_backend.cell.scene_config import SceneConfig, SimArmConfig
 from sim_backend.cell.sim_cell import SimCell
 from sim_backend.devices import SimArm, SimCamera, SimWrenchSensor
@@ -18,15 +16,6 @@ from sim_backend.devices import SimArm, SimCamera, SimWrenchSensor
 def cell():
     with SimCell(SceneConfig()) as c:
         yield c
-
-
-@pytest.mark.parametrize("check, make", [
-    (check_arm, lambda cell: SimArm(cell, SafetyLimits())),
-    (check_camera, SimCamera),
-    (check_wrench, SimWrenchSensor),
-], ids=["arm", "camera", "wrench"])
-def test_contract(cell, check, make):
-    check(lambda: make(cell))
 
 
 def test_devices_refuse_a_closed_cell():

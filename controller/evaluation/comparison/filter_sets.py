@@ -52,11 +52,13 @@ def orientations_deg(n: int) -> tuple[float, ...]:
 
 def set_name(grid: int, orientations: int, lambda_px: float, sigma_px: float,
              kind: Kind) -> str:
+    """The set's name, ``<grid>x<grid>x<orientations>-l<lambda_px>-s<sigma_px>-<kind>``."""
     return f"{grid}x{grid}x{orientations}-l{lambda_px:g}-s{sigma_px:g}-{kind}"
 
 
 def gabor_config(grid: int, orientations: int, lambda_px: float, sigma_px: float,
                  kind: Kind) -> GaborConfig:
+    """The Gabor bank of a grid x grid layout with n orientations (see the module docstring)."""
     return GaborConfig(centres_px=grid_centres_px(grid),
                        orientations_deg=orientations_deg(orientations), lambda_px=lambda_px,
                        sigma_px=sigma_px, kind=kind, roi_px=ROI_PX)

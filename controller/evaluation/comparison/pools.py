@@ -46,14 +46,17 @@ class _Progress:
         self.bar = tqdm(total=sum(self.weights), desc=desc, unit=unit, disable=not enabled)
 
     def tick(self, index: int, n: int = 1) -> None:
+        """Advance task ``index`` by ``n`` units, never beyond its weight."""
         n = max(0, min(n, self.weights[index] - self.done[index]))
         self.done[index] += n
         self.bar.update(n)
 
     def finish(self, index: int) -> None:
+        """Complete task ``index``'s share of the bar."""
         self.tick(index, self.weights[index] - self.done[index])
 
     def close(self) -> None:
+        """Close the bar."""
         self.bar.close()
 
 
@@ -78,6 +81,21 @@ class InlinePool:
 
     def run(self, fn: Job, tasks: Sequence[Any], *, weights: Sequence[int] | None = None,
             desc: str = "jobs", unit: str = "job", progress: bool = True) -> list[Any]:
+        """Run ``fn(task, tick)`` for each task in turn; returns the results in task order.
+
+        A job's own error propagates; the jobs after it do not run.
+
+        Args:
+            fn: the job (see the module docstring).
+            tasks: one job argument each.
+            weights: progress units per task (None: 1 each).
+            desc: the progress bar's label.
+            unit: the progress bar's unit.
+            progress: show the progress bar.
+
+        Raises:
+            ValueError: ``weights`` and ``tasks`` differ in length.
+        """
         bar = _Progress(_weights(tasks, weights), desc, unit, progress)
         try:
             results = []
@@ -145,6 +163,10 @@ class LocalPool:
 
     def run(self, fn: Job, tasks: Sequence[Any], *, weights: Sequence[int] | None = None,
             desc: str = "jobs", unit: str = "job", progress: bool = True) -> list[Any]:
+        """Like ``InlinePool.run``, in the worker processes; ``fn`` must be module-level.
+
+        The first job error that is collected is raised; jobs not yet started are then cancelled.
+        """
         self._runs += 1
         run_id = self._runs
         bar = _Progress(_weights(tasks, weights), desc, unit, progress)
@@ -204,6 +226,10 @@ class RayPool:
 
     def run(self, fn: Job, tasks: Sequence[Any], *, weights: Sequence[int] | None = None,
             desc: str = "jobs", unit: str = "job", progress: bool = True) -> list[Any]:
+        """Like ``InlinePool.run``, as Ray tasks; the bar advances only as jobs finish.
+
+        The first job error that is collected is raised; the pending tasks are then cancelled.
+        """
         ray = self._ray
         bar = _Progress(_weights(tasks, weights), desc, unit, progress)
         refs = [self._remote.remote(fn, task) for task in tasks]

@@ -12,13 +12,11 @@ Example: finepos bench val --json out/bench-val.json
 from __future__ import annotations
 
 import argparse
-import json
 import statistics
 import time
 from collections.abc import Callable
-from pathlib import Path
 
-from drivers.core.files import atomic_write_text
+from drivers.core.files import write_json
 from drivers.val.arm import ValArm
 from drivers.val.config import ValConfig
 from sim_backend.emulators.val.server import ValEmulator
@@ -63,8 +61,5 @@ def run(args: argparse.Namespace) -> int:
         commands = {"where": arm.pose, "speed": lambda: arm.set_speed(50)}
         results = {name: measure(arm, call, args.repeats) for name, call in commands.items()}
     report = {"transport": "pty", "repeats": args.repeats, "commands": results}
-    text = json.dumps(report, indent=2)
-    print(text)
-    Path(args.json).parent.mkdir(parents=True, exist_ok=True)
-    atomic_write_text(args.json, text + "\n")
+    write_json(args.json, report)
     return 0

@@ -17,8 +17,8 @@ import numpy as np
 import pytest
 
 from calibration_free.dataset import grid_offsets
-from calibration_free.pipeline import train_bundle
 from calibration_free.synthetic import SyntheticCell, render_dataset
+from calibration_free.training import train_bundle
 from controller.config import config_from_mapping
 from controller.devices import CellDevices
 from controller.service.client import ServiceClient

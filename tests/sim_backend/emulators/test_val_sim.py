@@ -36,10 +36,6 @@ def emulator(sim_arm):
         yield emu
 
 
-def test_contract_over_pty_with_the_simulated_arm(emulator):
-    check_arm(lambda: ValArm(ValConfig(port=emulator.url), LIMITS))
-
-
 def test_where_and_drive_report_the_simulated_joints(emulator, sim_arm):
     with ValArm(ValConfig(port=emulator.url)) as arm:
         reading = arm.where()

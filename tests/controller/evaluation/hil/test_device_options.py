@@ -8,7 +8,7 @@ import pytest
 
 from controller.commands.device_options import add_device_options, apply_device_options
 from controller.config import config_from_mapping
-from controller.device_overrides import with_device
+from controller.devices import with_device
 from drivers.core.errors import ConfigError
 
 
