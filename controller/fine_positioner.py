@@ -91,7 +91,7 @@ class FinePositioner:
         pose = self.devices.arm.pose()
         cell = self.devices.cell
         if cell is not None:
-            part = cell.part.part
+            part = cell.part
             default_depth = cell.grasp_depth_mm
         else:
             part = parts.part(self.config.controller.part)

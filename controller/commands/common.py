@@ -89,3 +89,15 @@ def parse_triple(text: str, what: str) -> tuple[float, float, float]:
                           f"got {text!r}")
     return values  # type: ignore[return-value]
 
+
+def add_command(subparsers, name: str, *, help: str, description: str) -> argparse.ArgumentParser:
+    """Add subcommand ``name``; its ``--help`` shows ``description`` as written, which starts
+    with its runnable example (``Example: finepos ...``).
+
+    Raises:
+        ValueError: the description does not start with an example.
+    """
+    if not description.startswith("Example: finepos "):
+        raise ValueError(f"finepos {name}: the help must start with 'Example: finepos ...'")
+    return subparsers.add_parser(name, help=help, description=description,
+                                 formatter_class=argparse.RawDescriptionHelpFormatter)

@@ -2,14 +2,18 @@
 
 from __future__ import annotations
 
-import argparse
 import json
 import sys
 import tempfile
 import time
 from pathlib import Path
 
-from controller.commands.common import add_config_option, config_from_args, positive_int
+from controller.commands.common import (
+    add_command,
+    add_config_option,
+    config_from_args,
+    positive_int,
+)
 from controller.evaluation.metrics import summarise
 from controller.evaluation.plots import plot_convergence
 from controller.evaluation.trials import run_trials, train_on_default_scene, with_lighting
@@ -89,12 +93,12 @@ def cmd_demo(args) -> int:
 
 def register(subparsers) -> None:
     """Add ``finepos demo``."""
-    p = subparsers.add_parser(
-        "demo", help="the whole job on the simulated cell: teach, acquire, train, evaluate",
+    p = add_command(
+        subparsers, "demo",
+        help="the whole job on the simulated cell: teach, acquire, train, evaluate",
         description="Example: finepos demo --out out/demo\n\nAuto-teach, acquire the NN1 and "
                     "NN2 grids, train, then position and grasp 50 random placements in good "
-                    "and in poor light; writes a table, a convergence plot and the logs.",
-        formatter_class=argparse.RawDescriptionHelpFormatter)
+                    "and in poor light; writes a table, a convergence plot and the logs.")
     add_config_option(p)
     p.add_argument("--out", default="out/demo", help="output folder")
     p.add_argument("--trials", type=positive_int, default=50, help="placements per lighting")

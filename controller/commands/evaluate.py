@@ -2,11 +2,15 @@
 
 from __future__ import annotations
 
-import argparse
 import json
 from pathlib import Path
 
-from controller.commands.common import add_config_option, config_from_args, positive_int
+from controller.commands.common import (
+    add_command,
+    add_config_option,
+    config_from_args,
+    positive_int,
+)
 from controller.evaluation.trials import evaluate
 from controller.loop.iteration_log import IterationLog
 from controller.systems.registry import SYSTEMS
@@ -34,8 +38,9 @@ def cmd_evaluate(args) -> int:
 
 def register(subparsers) -> None:
     """Add ``finepos evaluate``."""
-    p = subparsers.add_parser(
-        "evaluate", help="evaluate a system on random placements; JSON report",
+    p = add_command(
+        subparsers, "evaluate",
+        help="evaluate a system on random placements; JSON report",
         description="Example: finepos evaluate --system gabor --lighting poor --trials 100 "
                     "--seed 1 --json out/poor.json\n\nUnless --model is given, first teach, "
                     "acquire and train on the default scene; then test on the scene of "
@@ -44,8 +49,7 @@ def register(subparsers) -> None:
                     "state/model-gabor.fpm --trials 20\n\n--hil: hardware in the loop "
                     "on one machine: the same cell is served in this process over the VAL, ATI "
                     "and MJPEG emulators, and every arm, camera and wrench exchange goes through "
-                    "the real drivers (placement and ground truth come from the cell).",
-        formatter_class=argparse.RawDescriptionHelpFormatter)
+                    "the real drivers (placement and ground truth come from the cell).")
     add_config_option(p)
     p.add_argument("--system", default="gabor", choices=sorted(SYSTEMS))
     p.add_argument("--lighting", choices=["good", "poor", "dim", "side"],

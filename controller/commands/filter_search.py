@@ -3,11 +3,15 @@ repeatedly, locally in parallel or on a Ray cluster."""
 
 from __future__ import annotations
 
-import argparse
 import os
 import sys
 
-from controller.commands.common import add_config_file_option, config_from_args, positive_int
+from controller.commands.common import (
+    add_command,
+    add_config_file_option,
+    config_from_args,
+    positive_int,
+)
 from controller.evaluation.comparison.filter_report import search_markdown, write_search
 from controller.evaluation.comparison.filter_search import run_filter_search
 from controller.evaluation.comparison.filter_sets import FILTER_SETS, PAPER_SET, select_sets
@@ -30,8 +34,9 @@ def cmd_filter_search(args) -> int:
 
 def register(subparsers) -> None:
     """Add ``finepos filter-search``."""
-    p = subparsers.add_parser(
-        "filter-search", help="the paper's Fig. 5: compare Gabor filter sets (mean and spread)",
+    p = add_command(
+        subparsers, "filter-search",
+        help="the paper's Fig. 5: compare Gabor filter sets (mean and spread)",
         description="Example: finepos filter-search --repeats 10 --trials 20 --out out/fig5\n\n"
                     "Acquire the training grids once; per repeat (seeds SEED, SEED+1, ...) "
                     "train the base system and acquire a random test set; then per filter set "
@@ -41,8 +46,7 @@ def register(subparsers) -> None:
                     "DIR/filter_search.json, .md and .png (bars like Fig. 5). Jobs run on "
                     "--workers local processes, or on a Ray cluster with --ray ADDRESS "
                     "(needs pip install 'finepos[ray]' here and finepos on every node).\n\n"
-                    f"Filter sets (the paper's: {PAPER_SET}):\n  " + "\n  ".join(FILTER_SETS),
-        formatter_class=argparse.RawDescriptionHelpFormatter)
+                    f"Filter sets (the paper's: {PAPER_SET}):\n  " + "\n  ".join(FILTER_SETS))
     add_config_file_option(p)
     p.add_argument("--out", required=True, metavar="DIR", help="output folder")
     p.add_argument("--repeats", type=positive_int, default=10, help="repeats per filter set")

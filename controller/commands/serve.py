@@ -2,9 +2,7 @@
 
 from __future__ import annotations
 
-import argparse
-
-from controller.commands.common import add_config_file_option
+from controller.commands.common import add_command, add_config_file_option
 from controller.config import load_config
 from controller.service.sd_notify import Notifier
 from controller.service.service import Service
@@ -27,15 +25,15 @@ def cmd_serve(args) -> int:
 
 def register(subparsers) -> None:
     """Add ``finepos serve``."""
-    p = subparsers.add_parser(
-        "serve", help="run the controller service (control socket, systemd notify)",
+    p = add_command(
+        subparsers, "serve",
+        help="run the controller service (control socket, systemd notify)",
         description="Example: finepos serve --config deploy/finepos.yaml --socket /tmp/fp.sock"
                     "\n\nOwn the configured devices (the simulated cell without a config) and "
                     "serve the control API (JSON lines) on a UNIX socket; `finepos ctl` is its "
                     "client. SIGTERM stops (halting any motion), SIGHUP reloads the config and "
                     "the model (a bad one is refused, the old one kept). Under systemd "
-                    "(Type=notify) it reports READY, STATUS, WATCHDOG and STOPPING.",
-        formatter_class=argparse.RawDescriptionHelpFormatter)
+                    "(Type=notify) it reports READY, STATUS, WATCHDOG and STOPPING.")
     add_config_file_option(p)
     p.add_argument("--socket", metavar="PATH",
                    help="control socket (default: service.socket_path, "

@@ -2,11 +2,15 @@
 
 from __future__ import annotations
 
-import argparse
 import os
 import sys
 
-from controller.commands.common import add_config_file_option, config_from_args, positive_int
+from controller.commands.common import (
+    add_command,
+    add_config_file_option,
+    config_from_args,
+    positive_int,
+)
 from controller.evaluation.comparison.table1 import LIGHTINGS, TABLE1_SYSTEMS, run_table1
 from controller.evaluation.comparison.table1_report import table1_markdown, write_table1
 
@@ -26,15 +30,15 @@ def cmd_table1(args) -> int:
 
 def register(subparsers) -> None:
     """Add ``finepos table1``."""
-    p = subparsers.add_parser(
-        "table1", help="the paper's Table 1: gabor, pca and hough in good and poor light",
+    p = add_command(
+        subparsers, "table1",
+        help="the paper's Table 1: gabor, pca and hough in good and poor light",
         description="Example: finepos table1 --trials 100 --seed 1 --out out/table1\n\n"
                     "Acquire the NN1 and NN2 grids once on the default scene in good light, "
                     "train every system on them, then position (and grasp) the same random "
                     "placements with each system in good and in poor light. Writes "
                     "DIR/table1.md, DIR/table1.json (one `finepos evaluate --json` report per "
-                    "system and lighting) and DIR/convergence-<lighting>.png.",
-        formatter_class=argparse.RawDescriptionHelpFormatter)
+                    "system and lighting) and DIR/convergence-<lighting>.png.")
     add_config_file_option(p)
     p.add_argument("--out", required=True, metavar="DIR", help="output folder")
     p.add_argument("--trials", type=positive_int, default=100,

@@ -2,9 +2,8 @@
 
 from __future__ import annotations
 
-import argparse
-
 from controller.commands.common import (
+    add_command,
     add_config_option,
     add_log_option,
     config_from_args,
@@ -119,15 +118,15 @@ def cmd_grasp(args) -> int:
 
 def register(subparsers) -> None:
     """Add ``finepos teach``, ``acquire``, ``train``, ``position`` and ``grasp``."""
-    p = subparsers.add_parser(
-        "teach", help="record the nominal grasp pose into the cell's state file",
+    p = add_command(
+        subparsers, "teach",
+        help="record the nominal grasp pose into the cell's state file",
         description="Example: finepos teach --auto\n\nRecord the nominal pre-grasp pose. "
                     "--auto (simulated cell): place the gripper at the part's true grasp "
                     "pose; --device spacenav: jog with the 3D mouse through spacenavd "
                     "(controller.teach: button 0 records, button 1 aborts and writes nothing, "
                     "exit status 1); otherwise the arm's current pose is recorded.\n\n"
-                    "Example: finepos teach --device spacenav --start-offset 4,-3,5",
-        formatter_class=argparse.RawDescriptionHelpFormatter)
+                    "Example: finepos teach --device spacenav --start-offset 4,-3,5")
     add_config_option(p)
     add_device_options(p)
     how = p.add_mutually_exclusive_group()
@@ -148,37 +147,37 @@ def register(subparsers) -> None:
                    help="spacenav: give up after this long without a record (nothing written)")
     p.set_defaults(func=cmd_teach)
 
-    p = subparsers.add_parser(
-        "acquire", help="take the training or test images around the taught pose",
+    p = add_command(
+        subparsers, "acquire",
+        help="take the training or test images around the taught pose",
         description="Example: finepos acquire --set nn1\n\nDrive the grid of displacements "
                     "(nn1: a = 25 mm, nn2: a = 5 mm, b = 180/kappa deg, 3x3x7) or a random "
-                    "test set, and store the dataset under the state folder.",
-        formatter_class=argparse.RawDescriptionHelpFormatter)
+                    "test set, and store the dataset under the state folder.")
     add_config_option(p)
     add_device_options(p)
     p.add_argument("--set", required=True, choices=DATASETS)
     p.add_argument("--seed", type=int, default=0, help="seed of the random test set")
     p.set_defaults(func=cmd_acquire)
 
-    p = subparsers.add_parser(
-        "train", help="train NN1 and NN2 into a model bundle",
+    p = add_command(
+        subparsers, "train",
+        help="train NN1 and NN2 into a model bundle",
         description="Example: finepos train\n\nTrain the system from the nn1 and nn2 "
-                    "datasets into state/model-<system>.",
-        formatter_class=argparse.RawDescriptionHelpFormatter)
+                    "datasets into state/model-<system>.")
     add_config_option(p)
     p.add_argument("--system", default="gabor", choices=sorted(SYSTEMS))
     p.set_defaults(func=cmd_train)
 
-    p = subparsers.add_parser(
-        "position", help="run the fine-positioning loop (and optionally grasp)",
+    p = add_command(
+        subparsers, "position",
+        help="run the fine-positioning loop (and optionally grasp)",
         description="Example: finepos position --offset 12,-8,20 --grasp\n\nRun the half/full "
                     "loop from where the arm is; --offset first moves the arm to the taught "
                     "pose displaced by it (mm, mm, deg; through the safety layer).\n\n"
                     "Hardware in the loop (after finepos sim val-emulator --ati --mjpeg 0):\n"
                     "  finepos position --arm val --port /dev/pts/3 --wrench ati "
                     "--wrench-port /dev/pts/4\n"
-                    "    --camera http://127.0.0.1:8080/stream.mjpg --offset 12,-8,20 --grasp",
-        formatter_class=argparse.RawDescriptionHelpFormatter)
+                    "    --camera http://127.0.0.1:8080/stream.mjpg --offset 12,-8,20 --grasp")
     add_config_option(p)
     add_device_options(p)
     add_log_option(p)
@@ -190,11 +189,11 @@ def register(subparsers) -> None:
     p.add_argument("--grasp", action="store_true", help="grasp after converging")
     p.set_defaults(func=cmd_position)
 
-    p = subparsers.add_parser(
-        "grasp", help="force-guarded grasp from the current pose",
+    p = add_command(
+        subparsers, "grasp",
+        help="force-guarded grasp from the current pose",
         description="Example: finepos grasp\n\nDescend with the wrist sensor guarding, close, "
-                    "verify the grip, lift.",
-        formatter_class=argparse.RawDescriptionHelpFormatter)
+                    "verify the grip, lift.")
     add_config_option(p)
     add_device_options(p)
     p.set_defaults(func=cmd_grasp)

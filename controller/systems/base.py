@@ -76,7 +76,12 @@ class VisionSystem:
             BundleError: the file is missing, corrupt, of another system or taught on another
                 part.
         """
-        model = cls.model_cls.load(path, expect_object=state.object_kind if state else None)
+        return cls.trained(
+            cls.model_cls.load(path, expect_object=state.object_kind if state else None))
+
+    @classmethod
+    def trained(cls, model: Any) -> TrainedModel:
+        """A model object with its training cost, as its metadata records it."""
         seconds, images = cls.training_cost(model.training)
         return TrainedModel(cls.name, model, seconds, images, cls.feature_count(model))
 

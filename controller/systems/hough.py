@@ -70,5 +70,4 @@ class HoughSystem(VisionSystem):
         (``train_hough``)."""
         model = train_hough(nn1, nn2, object_kind=state.object_kind, kappa=state.kappa,
                             nominal_pose=state.nominal_pose, config=perception_cfg.hough)
-        seconds, images = cls.training_cost(model.training)
-        return TrainedModel(cls.name, model, seconds, images, model.feature_count)
+        return cls.trained(model)

@@ -62,5 +62,4 @@ class PcaSystem(VisionSystem):
                           nominal_pose=state.nominal_pose, config=perception_cfg.pca,
                           seed=perception_cfg.seed,
                           nn1_extra=nn2 if perception_cfg.nn1_uses_nn2_set else None)
-        seconds, images = cls.training_cost(model.training)
-        return TrainedModel(cls.name, model, seconds, images, model.feature_count)
+        return cls.trained(model)

@@ -8,6 +8,7 @@ sees it (the image repeats every 360/kappa deg), which is also the period of its
 
 from __future__ import annotations
 
+import dataclasses
 import math
 from collections.abc import Callable
 from dataclasses import dataclass
@@ -41,39 +42,11 @@ class PartGeometry:
 
 
 @dataclass(frozen=True)
-class PartSpec:
-    """One kind of part in the simulated cell: its catalogue entry and its geometry.
+class PartSpec(Part):
+    """One kind of part in the simulated cell: its catalogue entry (every field of
+    ``drivers.core.parts.Part``) and ``build``, which makes its geometry (mm, part frame)."""
 
-    part: the catalogue entry (kappa, grasp width and depth, jaw opening, mass, colour);
-    build: makes the part's geometry (mm, part frame).
-    """
-
-    part: Part
     build: Callable[[], PartGeometry]
-
-    @property
-    def kind(self) -> str:
-        return self.part.kind
-
-    @property
-    def kappa(self) -> int:
-        return self.part.kappa
-
-    @property
-    def grasp_width_mm(self) -> float:
-        return self.part.grasp_width_mm
-
-    @property
-    def grip_below_top_mm(self) -> float:
-        return self.part.grip_below_top_mm
-
-    @property
-    def mass_g(self) -> float:
-        return self.part.mass_g
-
-    @property
-    def color(self) -> tuple[float, float, float]:
-        return self.part.color
 
     @cached_property
     def geometry(self) -> PartGeometry:
@@ -147,5 +120,5 @@ def _screw() -> PartGeometry:
 _BUILDERS: dict[str, Callable[[], PartGeometry]] = {
     "cube": _cube, "nut": _nut, "ledge": _ledge, "screw": _screw,
 }
-PARTS: dict[str, PartSpec] = {kind: PartSpec(part, _BUILDERS[kind])
+PARTS: dict[str, PartSpec] = {kind: PartSpec(**dataclasses.asdict(part), build=_BUILDERS[kind])
                               for kind, part in CATALOGUE.items()}

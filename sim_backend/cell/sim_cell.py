@@ -166,7 +166,7 @@ class SimCell:
             self._labels[item.body_id] = item.label
         self._shadow_map = ShadowMap(cid, self._table_id)
         self._held: np.ndarray | None = None
-        self._finger_offset_mm = self.part.part.jaw_opening_mm / 2.0
+        self._finger_offset_mm = self.part.jaw_opening_mm / 2.0
         self._contacts: list[contact.Contact] | None = None
         obj = self.scene.object
         self._q_cmd = np.radians(_IK_SEED_DEG)
@@ -296,7 +296,7 @@ class SimCell:
     @property
     def grasp_depth_mm(self) -> float:
         """How far to descend along the approach axis from the nominal pose to grip the part."""
-        return self.part.part.grasp_depth_mm
+        return self.part.grasp_depth_mm
 
     @property
     def holding(self) -> bool:
@@ -456,7 +456,7 @@ class SimCell:
             rest = _translation(x, y, 0.0)
             rest[:3, :3] = rot_z(math.radians(phi))
             self._set_part_pose(rest)
-        self._set_fingers(self.part.part.jaw_opening_mm / 2.0)
+        self._set_fingers(self.part.jaw_opening_mm / 2.0)
         return self.finger_width_mm()
 
     def close_gripper(self) -> float:

@@ -1,0 +1,28 @@
+"""``finepos sim ...`` (the simulated cell and its device emulators) and ``finepos bench ...``
+(benchmarks that print JSON numbers: medians, ratios): command groups whose leaves live in
+other packages (see ``controller.commands.leaves``)."""
+
+from controller.commands.leaves import register_group
+
+SIM_LEAVES = {
+    "val-emulator": "sim_backend.emulators.val.command",
+    "snapshot": "sim_backend.snapshot",
+    "magellan-emulator": "sim_backend.emulators.magellan.command",
+    "ati-emulator": "sim_backend.emulators.ati.command",
+    "camera-stream": "sim_backend.emulators.mjpeg.command",
+}
+BENCH_LEAVES = {
+    "val": "sim_backend.emulators.val.bench",
+    "sim": "sim_backend.bench",
+    "perception": "calibration_free.bench",
+    "service": "controller.service.bench",
+    "ati": "sim_backend.emulators.ati.bench",
+    "camera-stream": "sim_backend.emulators.mjpeg.bench",
+}
+
+
+def register(subparsers) -> None:
+    """Add ``finepos sim`` and ``finepos bench``, one leaf per entry of their tables."""
+    register_group(subparsers, "sim", "the simulated work cell and device emulators",
+                   SIM_LEAVES)
+    register_group(subparsers, "bench", "benchmarks that print JSON", BENCH_LEAVES)
