@@ -291,6 +291,24 @@ def train_nn2(rois: np.ndarray | list[np.ndarray], dphi_deg: np.ndarray, kappa: 
                      epochs=epochs, weight_decay=weight_decay)
 
 
+def training_sets(nn1_data: Dataset, nn2_data: Dataset,
+                  nn1_extra: Dataset | None = None) -> dict[str, Dataset]:
+    """The sets a system trains on, by name: ``nn1``, ``nn2`` and, if given, ``nn1_extra``."""
+    sets = {"nn1": nn1_data, "nn2": nn2_data}
+    if nn1_extra is not None:
+        sets["nn1_extra"] = nn1_extra
+    return sets
+
+
+def nn1_samples(sets: dict[str, Dataset], prep: PreparedSets) -> tuple[np.ndarray, np.ndarray]:
+    """NN1's samples: the part's (u, v) in every usable image of ``nn1`` (and ``nn1_extra``),
+    and each image's (dx_mm, dy_mm, dphi_deg) label, as (N, 2) and (N, 3) arrays."""
+    names = [n for n in ("nn1", "nn1_extra") if n in sets]
+    uv = np.concatenate([prep.centres(n) for n in names])
+    labels = np.concatenate([sets[n].labels[prep.usable[n]] for n in names])
+    return uv, labels
+
+
 def train_bundle(nn1_data: Dataset, nn2_data: Dataset, *, object_kind: str, kappa: int,
                  nominal_pose: Pose | Mapping[str, float], gabor: GaborConfig | None = None,
                  nn2_hidden: tuple[int, ...] = NN2_HIDDEN, seed: int = 0,
@@ -339,15 +357,10 @@ def train_bundle(nn1_data: Dataset, nn2_data: Dataset, *, object_kind: str, kapp
     start = time.perf_counter()
     gabor = gabor or GaborConfig()
     pose = check_part(object_kind, kappa, nominal_pose)
-    sets = {"nn1": nn1_data, "nn2": nn2_data}
-    if nn1_extra is not None:
-        sets["nn1_extra"] = nn1_extra
+    sets = training_sets(nn1_data, nn2_data, nn1_extra)
     prep = prepare_training(sets, polarity, localisation_channel)
-
-    nn1_names = [n for n in ("nn1", "nn1_extra") if n in sets]
-    uv = np.concatenate([prep.centres(n) for n in nn1_names])
-    dxdy = np.concatenate([sets[n].labels[prep.usable[n], :2] for n in nn1_names])
-    labels = np.concatenate([sets[n].labels[prep.usable[n]] for n in nn1_names])
+    uv, labels = nn1_samples(sets, prep)
+    dxdy = np.ascontiguousarray(labels[:, :2])
     at_nominal = (np.hypot(labels[:, 0], labels[:, 1]) < NOMINAL_TOL_MM) \
         & (np.abs(labels[:, 2]) < NOMINAL_TOL_DEG)
     if not at_nominal.any():

@@ -34,6 +34,15 @@ class TrainedModel:
     feature_count: int
 
 
+class ModelEstimator:
+    """An Estimator that runs one trained model object, ``self.model``."""
+
+    name: ClassVar[str]
+
+    def __init__(self, model: Any) -> None:
+        self.model = model
+
+
 class VisionSystem:
     """One vision system: how it trains, saves, loads and perceives (class-level, stateless).
 

@@ -15,19 +15,16 @@ import numpy as np
 from calibration_free.baselines.hough.model import HoughModel, HoughPercept
 from calibration_free.baselines.hough.train import train_hough
 from calibration_free.dataset import Dataset
-from controller.systems.base import TrainedModel, VisionSystem
+from controller.systems.base import ModelEstimator, TrainedModel, VisionSystem
 from controller.systems.estimator import RotationEstimate, TranslationEstimate, percept_of
 from controller.teach.cell_state import CellState
 
 
-class HoughEstimator:
+class HoughEstimator(ModelEstimator):
     """Validated Hough lines of the outline -> rotation; centroid + rotation -> PSOM. Its one
     pass over the frame yields both, so the rotation step only reads the percept."""
 
     name = "hough"
-
-    def __init__(self, model: HoughModel) -> None:
-        self.model = model
 
     def estimate_translation(self, image: np.ndarray) -> TranslationEstimate:
         """The whole Hough pass; see ``Estimator.estimate_translation``."""

@@ -14,18 +14,15 @@ import numpy as np
 from calibration_free.baselines.pca.model import PcaModel, PcaPercept
 from calibration_free.baselines.pca.train import train_pca
 from calibration_free.dataset import Dataset
-from controller.systems.base import TrainedModel, VisionSystem
+from controller.systems.base import ModelEstimator, TrainedModel, VisionSystem
 from controller.systems.estimator import RotationEstimate, TranslationEstimate, percept_of
 from controller.teach.cell_state import CellState
 
 
-class PcaEstimator:
+class PcaEstimator(ModelEstimator):
     """NN1 on the part's centre; eigenimage projections of the ROI -> fuzzy controller."""
 
     name = "pca"
-
-    def __init__(self, model: PcaModel) -> None:
-        self.model = model
 
     def estimate_translation(self, image: np.ndarray) -> TranslationEstimate:
         """Localisation and NN1; see ``Estimator.estimate_translation``."""

@@ -25,7 +25,9 @@ from calibration_free.training import (
     NN1_EPOCHS,
     NN1_HIDDEN,
     check_part,
+    nn1_samples,
     prepare_training,
+    training_sets,
 )
 from drivers.core.pose import Pose
 
@@ -54,15 +56,11 @@ def train_pca(nn1_data: Dataset, nn2_data: Dataset, *, object_kind: str, kappa: 
     start = time.perf_counter()
     config = config or PcaConfig()
     pose = check_part(object_kind, kappa, nominal_pose)
-    sets = {"nn1": nn1_data, "nn2": nn2_data}
-    if nn1_extra is not None:
-        sets["nn1_extra"] = nn1_extra
+    sets = training_sets(nn1_data, nn2_data, nn1_extra)
     prep = prepare_training(sets, polarity)
-
-    nn1_names = [n for n in ("nn1", "nn1_extra") if n in sets]
-    uv = np.concatenate([prep.centres(n) for n in nn1_names])
-    dxdy = np.concatenate([sets[n].labels[prep.usable[n], :2] for n in nn1_names])
-    nn1 = train_mlp(uv, dxdy, NN1_HIDDEN, seed=seed, epochs=NN1_EPOCHS)
+    uv, labels = nn1_samples(sets, prep)
+    nn1 = train_mlp(uv, np.ascontiguousarray(labels[:, :2]), NN1_HIDDEN, seed=seed,
+                    epochs=NN1_EPOCHS)
 
     t_pca = time.perf_counter()
     vectors = np.stack([roi_vector(extract_roi(prep.normalised["nn2"][i], u, v, config.roi_px))
