@@ -24,11 +24,13 @@ from typing import Any
 import numpy as np
 
 from calibration_free.errors import DatasetError
-from drivers.core.files import atomic_write_bytes
+from drivers.core.files import atomic_write_bytes, read_regular_file
 
 FORMAT = "finepos-dataset"
 VERSION = 1
 LABEL_COLUMNS = ("dx_mm", "dy_mm", "dphi_deg")
+LABEL_LIMITS = (1000.0, 1000.0, 360.0)  # |label| bounds per column: a damaged file beyond
+MAX_DATASET_BYTES = 4 << 30  # a set of a few hundred compressed images is far smaller
 
 
 @dataclass(frozen=True)
@@ -56,6 +58,11 @@ class Dataset:
                                f"{labels.shape}")
         if not np.isfinite(labels).all():
             raise DatasetError("labels: must be finite")
+        worst = np.abs(labels).max(axis=0) if labels.shape[0] else np.zeros(3)
+        for column, value, limit in zip(LABEL_COLUMNS, worst, LABEL_LIMITS, strict=True):
+            if value > limit:
+                raise DatasetError(f"labels: {column} reaches {value:.6g}, beyond +-{limit:g} "
+                                   "(no fine-positioning grid spans that)")
         object.__setattr__(self, "labels", labels)
         n = labels.shape[0]
         if self.images is not None:
@@ -108,7 +115,8 @@ class Dataset:
                 version.
         """
         try:
-            with np.load(path, allow_pickle=False) as npz:
+            raw = read_regular_file(path, MAX_DATASET_BYTES)  # never blocks on a FIFO
+            with np.load(io.BytesIO(raw), allow_pickle=False) as npz:
                 arrays = {k: npz[k] for k in npz.files}
         except (OSError, ValueError, EOFError, KeyError, zipfile.BadZipFile,
                 zlib.error) as exc:

@@ -56,7 +56,7 @@ class GaborConfig:
     sigma_px: float = field(default=12.5, metadata={"min": 0.0, "exclusive_min": True})
     alpha: float = field(default=1.0, metadata={"min": 0.0, "exclusive_min": True})
     kind: Kind = "even"
-    roi_px: int = field(default=50, metadata={"min": 1})
+    roi_px: int = field(default=50, metadata={"min": 1, "max": 512})  # max: a camera image
 
     def __post_init__(self) -> None:
         if not self.centres_px or not self.orientations_deg:

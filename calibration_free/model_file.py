@@ -28,7 +28,10 @@ from safetensors import SafetensorError
 from calibration_free.errors import BundleError
 from calibration_free.front_end import FrontEnd
 from drivers.core.errors import FineposError
-from drivers.core.files import atomic_write_bytes
+from drivers.core.files import atomic_write_bytes, read_regular_file
+
+# Models are a few MB; a larger file is not one (and must not fill the memory).
+MAX_MODEL_BYTES = 512 * 1024 * 1024
 
 FORMAT = "finepos-model"
 _INFO_KEY = "finepos_model"
@@ -93,7 +96,7 @@ def read_model(path: str | Path, kind: str, version: int) \
             another format or system, or of another version.
     """
     try:
-        data = Path(path).read_bytes()
+        data = read_regular_file(path, MAX_MODEL_BYTES)
     except OSError as exc:
         raise BundleError(f"{path}: cannot read {kind} model: {exc.strerror or exc}") from exc
     if len(data) < 8:
@@ -108,7 +111,7 @@ def read_model(path: str | Path, kind: str, version: int) \
         info = json.loads(info_json)
     except (UnicodeDecodeError, ValueError, KeyError, TypeError) as exc:
         raise BundleError(f"{path}: not a finepos model file, or a corrupt header "
-                          f"({exc!r})") from exc
+                          f"({_header_problem(exc)})") from exc
     if not isinstance(info, dict) or info.get("format") != FORMAT:
         raise BundleError(f"{path}: not a finepos model file")
     if info.get("kind") != kind:
@@ -119,11 +122,29 @@ def read_model(path: str | Path, kind: str, version: int) \
                           f"reads version {version}); retrain the model")
     try:
         arrays = safetensors.numpy.load(data)
-    except SafetensorError as exc:
-        raise BundleError(f"{path}: corrupt or truncated {kind} model: {exc}") from exc
+    except (SafetensorError, ValueError, TypeError) as exc:
+        raise BundleError(f"{path}: corrupt or truncated {kind} model: "
+                          f"{_short(str(exc))}") from exc
     if _digest(info_json, arrays) != digest:
         raise BundleError(f"{path}: corrupt {kind} model (checksum mismatch)")
     return info, arrays
+
+
+def _short(text: str, limit: int = 160) -> str:
+    """``text`` on one line, cut to ``limit`` characters (never a whole header)."""
+    text = " ".join(text.split())
+    return text if len(text) <= limit else text[:limit - 3] + "..."
+
+
+def _header_problem(exc: Exception) -> str:
+    """What is wrong with a header, in a few words (the exception's repr would carry it)."""
+    if isinstance(exc, UnicodeDecodeError):
+        return f"byte {exc.object[exc.start]:#04x} at header offset {exc.start} is not UTF-8"
+    if isinstance(exc, json.JSONDecodeError):
+        return f"not JSON: {exc.msg} at header offset {exc.pos}"
+    if isinstance(exc, KeyError):
+        return f"no {_short(str(exc.args[0]), 40)!r} entry"
+    return f"{type(exc).__name__}: {_short(str(exc), 80)}"
 
 
 def nominal_pose_of(info: dict[str, Any]) -> dict[str, float]:

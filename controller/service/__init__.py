@@ -21,7 +21,7 @@ Commands (arguments, types, ranges and defaults in ``commands.COMMANDS``):
 
 - ``status``: state, since, reason, pid, uptime_s, job (running), last_job (with outcome,
   reason, result), pose (last read or reached, with its time), last_iteration (the latest
-  iteration record), model (system, file, train images), fault (reason, since, devices not
+  iteration record), model (system, file, train images), fault (code, reason, since, devices not
   active, reconnected, reconnect_attempts), config (source, last_reload), iteration_log, clients;
 - jobs, refused unless idle (``busy``, ``fault``, ``not_ready``, ``stopping``): ``teach``
   (``auto``: simulated cell only; otherwise the current pose, with the grasp geometry of
@@ -32,6 +32,8 @@ Commands (arguments, types, ranges and defaults in ``commands.COMMANDS``):
   started, true when it has ended; the job's ``outcome`` is done, failed (the reason says why,
   e.g. ``no_object: ...`` or ``grasp failed: excessive force ...``), aborted, or fault;
 - ``abort``: preempts the running job (no further motion command is sent) and halts the arm;
+  it answers once the halt was acknowledged or after ``service.abort_wait_s`` (then
+  ``halt_error`` says the halt is still waiting, and a ``halt`` event reports its outcome);
 - ``reload``: loads the model of ``system`` from the state folder (a bad one is refused and
   the old one stays in use);
 - ``reset``: in fault, reconnects the devices that are not active, reads each device once and
@@ -40,6 +42,7 @@ Commands (arguments, types, ranges and defaults in ``commands.COMMANDS``):
   ``{"event": "iteration", "record": {...}}`` (the iteration log's records),
   ``{"event": "state", "state": ..., "previous": ..., "reason": ..., "time": ...}``,
   ``{"event": "dropped", "count": N}`` (the client read too slowly; the log file has them all),
+  ``{"event": "halt", "ok": ..., "error": ...}`` (a halt that outlived its ``abort``),
   ``{"event": "end", ...}`` when the service stops;
 - ``auth`` (``token``): the first request on a TCP connection.
 
@@ -49,9 +52,16 @@ credentials (SO_PEERCRED, SO_PEERGROUPS) must match the service's own user,
 and is disconnected. There is no network listener unless ``service.tcp`` is configured; that one
 binds to loopback only and requires ``auth`` with the token from ``service.tcp.token_file``.
 
+Faults: ``status.fault.code`` is ``device`` (a device error; ``reset`` reconnects) or
+``disk_full`` (the iteration log cannot be written; idle again by itself once there is room).
+The service never exits on a device or file error.
+
 systemd: READY=1 once serving, STATUS= on every state change, WATCHDOG=1 from the control loop,
-STOPPING=1 on shutdown (``sd_notify``). SIGTERM halts and stops; SIGHUP reloads the config and
-the model (``config_reload`` says what may change live).
+STOPPING=1 on shutdown (``sd_notify``). SIGTERM halts and stops within
+``service.stop_timeout_s``; SIGHUP reloads the config and the model (``config_reload`` says what
+may change live; a file that cannot be loaded is refused and the old config stays). Exit
+status: 0 after SIGTERM, 2 for a config that cannot be loaded at start (final under the unit's
+``RestartPreventExitStatus=2``), 1 otherwise (restarted).
 
 Modules: ``service`` (the Service: state, jobs, control loop), ``server`` and ``connection``
 (the socket side), ``protocol`` and ``commands`` (wire format and validation), ``listeners``,

@@ -79,8 +79,10 @@ def _number(name: str, value: Any, kind: type, low: float | None, high: float | 
             (kind is int and not isinstance(value, int)):
         raise ValueError(f"{name}: expected {'an integer' if kind is int else 'a number'}, "
                          f"got {type(value).__name__}")
-    if not math.isfinite(value):
+    if isinstance(value, float) and not math.isfinite(value):
         raise ValueError(f"{name}: expected a finite number")
+    # Compared before any conversion: Python compares a huge int with a float exactly, while
+    # float() of it would overflow.
     if (low is not None and value < low) or (high is not None and value > high):
         raise ValueError(f"{name}: must be within [{low:g}, {high:g}], got {value!r:.40}")
     return float(value) if kind is float else value

@@ -53,8 +53,15 @@ class ServiceConfig:
     (doubling from the first to the second);
     stall_timeout_s: one arm command running longer than this withholds the systemd watchdog
     ping, so systemd restarts a hung service (keep it above the arm's own move timeout);
-    stop_timeout_s: on shutdown, how long to wait for an aborted job before closing the ports;
-    tcp: the optional loopback TCP listener (None: no network listener).
+    stop_timeout_s: the whole shutdown (halt, the aborted job, the clients, the ports) ends
+    within this, whatever the devices and clients do;
+    abort_wait_s: ``abort`` waits this long for the arm to acknowledge the halt before answering
+    (a halt still unanswered then is reported in the answer and later as a ``halt`` event);
+    tcp: the optional loopback TCP listener (None: no network listener);
+    record_dir: record every positioning job as ``<job>.mcap`` in this folder
+    (``controller.recording``; None: no recordings);
+    live_view_port: serve the annotated hand-camera image as MJPEG on 127.0.0.1 at this port
+    (``controller.recording.live``; None: off).
     """
 
     socket_path: str = "/run/finepos/finepos.sock"
@@ -67,8 +74,11 @@ class ServiceConfig:
     reconnect_initial_s: float = field(default=0.5, metadata=_POSITIVE)
     reconnect_max_s: float = field(default=30.0, metadata=_POSITIVE)
     stall_timeout_s: float = field(default=180.0, metadata=_POSITIVE)
-    stop_timeout_s: float = field(default=2.0, metadata=_POSITIVE)
+    stop_timeout_s: float = field(default=2.0, metadata={**_POSITIVE, "max": 600.0})
+    abort_wait_s: float = field(default=0.08, metadata={**_POSITIVE, "max": 10.0})
     tcp: TcpConfig | None = None
+    record_dir: str | None = None
+    live_view_port: int | None = field(default=None, metadata={"min": 1, "max": 65535})
 
     def __post_init__(self) -> None:
         if not self.socket_path.strip():

@@ -1,8 +1,9 @@
 """One client connection: read request lines, answer each, or turn into an event stream.
 
 Every line gets exactly one response line. A TCP connection must authenticate first
-(``auth`` with the token, within AUTH_TIMEOUT_S; anything else, or a wrong token, is answered
-``unauthorized`` and the connection closed). ``stream`` answers once, then sends events until
+(``auth`` with the token, within AUTH_TIMEOUT_S of connecting: an absolute deadline that bytes
+trickling in do not extend; anything else, or a wrong token, is answered ``unauthorized`` and
+the connection closed). ``stream`` answers once, then sends events until
 the client or the service goes away; a stream connection takes no further requests (what the
 client sends is discarded).
 Errors in a request never end the connection; an unexpected error in the service is logged with
@@ -11,10 +12,12 @@ its traceback and answered ``failed``.
 
 from __future__ import annotations
 
+import contextlib
 import hmac
 import logging
 import socket
 import threading
+from collections.abc import Callable
 from typing import Any, Protocol
 
 from controller.service.events import Subscription
@@ -57,7 +60,10 @@ class Connection:
     """Serves one accepted socket until it closes (``serve`` runs in the connection's thread)."""
 
     def __init__(self, sock: socket.socket, name: str, handler: RequestHandler, max_bytes: int,
-                 closing: threading.Event, token: str | None = None) -> None:
+                 closing: threading.Event, token: str | None = None,
+                 admit: Callable[[Connection], tuple[str, str] | None] | None = None) -> None:
+        """``admit`` (TCP): called once the token was accepted; returns (code, message) to
+        refuse the now authenticated connection (the server's client limit), else None."""
         self.sock = sock
         self.name = name
         self._handler = handler
@@ -65,15 +71,34 @@ class Connection:
         self._max_bytes = max_bytes
         self._closing = closing
         self._token = token  # None: authenticated by its peer credentials already
+        self._admit = admit
+        self._auth_timer: threading.Timer | None = None
         if token is not None:
-            sock.settimeout(AUTH_TIMEOUT_S)
+            self._auth_timer = threading.Timer(AUTH_TIMEOUT_S, self._auth_expired)
+            self._auth_timer.daemon = True
+
+    @property
+    def authenticated(self) -> bool:
+        """Whether the peer may send commands (a UNIX peer always; TCP after ``auth``)."""
+        return self._token is None
+
+    def _auth_expired(self) -> None:
+        if self._token is not None:
+            logger.warning("%s: refused: no auth within %g s", self.name, AUTH_TIMEOUT_S)
+            with contextlib.suppress(OSError):
+                self.sock.shutdown(socket.SHUT_RDWR)
 
     def serve(self) -> None:
         """Answer requests until the client or the server ends the connection."""
+        if self._auth_timer is not None:
+            self._auth_timer.start()
         try:
             self._serve()
         except OSError as exc:  # the client went away mid-write, or the server shut us down
             logger.debug("%s: connection ended: %s", self.name, exc)
+        finally:
+            if self._auth_timer is not None:
+                self._auth_timer.cancel()
 
     def _serve(self) -> None:
         while not self._closing.is_set():
@@ -92,6 +117,13 @@ class Connection:
                 self._send(error_line(request_id(data), exc.code, exc.message))
                 if self._token is not None:
                     return  # not authenticated: no second chance on this connection
+                continue
+            except Exception as exc:  # a parser bug must not end the connection unanswered
+                logger.exception("%s: parsing a request failed", self.name)
+                self._send(error_line(request_id(data), "bad_request",
+                                      f"request not understood: {type(exc).__name__}"))
+                if self._token is not None:
+                    return
                 continue
             if self._token is not None:
                 if not self._authenticate(request):
@@ -120,7 +152,12 @@ class Connection:
         if request.cmd == "auth" and hmac.compare_digest(request.args["token"].encode(),
                                                          token.encode()):
             self._token = None
-            self.sock.settimeout(None)
+            if self._auth_timer is not None:
+                self._auth_timer.cancel()
+            refusal = self._admit(self) if self._admit is not None else None
+            if refusal is not None:
+                self._send(error_line(request.id, *refusal))
+                return False
             self._send(ok_line(request.id, {"authenticated": True}))
             return True
         logger.warning("%s: refused: %s", self.name, "wrong token" if request.cmd == "auth"

@@ -14,6 +14,7 @@ rejected, grasp guard tripped). ``classify`` turns whatever ended a job into its
 
 from __future__ import annotations
 
+import errno
 import threading
 import time
 from collections.abc import Callable
@@ -21,6 +22,7 @@ from dataclasses import dataclass, field
 from typing import Any
 
 from controller.fine_positioner import FinePositioner
+from controller.loop.iteration_log import LogWriteError
 from controller.service.model_slot import ModelSlot
 from drivers.core.errors import (
     DeviceFaultError,
@@ -143,6 +145,13 @@ BODIES: dict[str, Callable[[JobContext], dict[str, Any]]] = {
 }
 
 
+def is_disk_full(exc: BaseException | None) -> bool:
+    """Whether ``exc`` says a file system or quota is full (a log, dataset or model write)."""
+    if isinstance(exc, LogWriteError):
+        return exc.disk_full
+    return isinstance(exc, OSError) and exc.errno in (errno.ENOSPC, errno.EDQUOT)
+
+
 def classify(exc: BaseException | None, aborted: bool,
              not_active: dict[str, str]) -> tuple[str, str]:
     """(outcome, reason) of a job that raised ``exc`` (None: returned normally)."""
@@ -152,6 +161,10 @@ def classify(exc: BaseException | None, aborted: bool,
         return "fault", f"device fault: {devices}{cause}"
     if isinstance(exc, DEVICE_ERRORS):
         return "fault", f"device error: {type(exc).__name__}: {exc}"
+    if isinstance(exc, LogWriteError):  # "disk_full: ..." when the disk is full
+        return "fault", str(exc)
+    if is_disk_full(exc):  # a dataset or model that did not fit (the old file stays)
+        return "fault", f"disk_full: {exc.strerror}: {exc.filename or ''}".rstrip(": ")
     if aborted:
         return "aborted", "aborted by request"
     if exc is None:

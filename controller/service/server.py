@@ -4,8 +4,9 @@ each UNIX peer's credentials, and serves every connection in its own thread.
 An accept thread waits on a selector with a wake-up pipe, so ``close()`` stops it at once;
 ``close()`` then shuts the reading side of every open connection (a blocked read returns, a
 stream sends its last event), joins their threads and removes the socket file. At most
-``max_clients`` connections are served; one more is answered ``too_many_clients`` and closed, as
-is a peer the policy refuses.
+``max_clients`` authenticated connections are served; one more is answered ``too_many_clients``
+and closed, as is a peer the policy refuses. TCP connections that have not authenticated yet
+do not count: they have their own MAX_UNAUTHENTICATED slots (and AUTH_TIMEOUT_S each).
 """
 
 from __future__ import annotations
@@ -16,6 +17,7 @@ import os
 import selectors
 import socket
 import threading
+import time
 from pathlib import Path
 
 from controller.service.config import ServiceConfig
@@ -27,6 +29,9 @@ from controller.service.protocol import error_line
 logger = logging.getLogger(__name__)
 
 JOIN_TIMEOUT_S = 2.0
+# TCP connections still to authenticate are served up to this many at once, apart from
+# max_clients: peers without the token can never take the slots of those who have it.
+MAX_UNAUTHENTICATED = 4
 
 
 class ControlServer:
@@ -42,6 +47,7 @@ class ControlServer:
         self._listeners: dict[socket.socket, str] = {}
         self._inode: int | None = None
         self._connections: dict[socket.socket, threading.Thread] = {}
+        self._pending: set[socket.socket] = set()  # TCP connections not yet authenticated
         self._lock = threading.Lock()
         self._closing = threading.Event()
         self._wake_r, self._wake_w = -1, -1
@@ -50,9 +56,18 @@ class ControlServer:
 
     @property
     def client_count(self) -> int:
-        """The number of connections being served now."""
+        """The number of authenticated connections being served now."""
         with self._lock:
-            return len(self._connections)
+            return len(self._connections) - len(self._pending)
+
+    def _admit_authenticated(self, connection: Connection) -> tuple[str, str] | None:
+        """A TCP connection just authenticated: it takes a client slot if one is free."""
+        with self._lock:
+            self._pending.discard(connection.sock)
+            if len(self._connections) - len(self._pending) > self.config.max_clients:
+                return ("too_many_clients", f"{self.config.max_clients} clients connected "
+                                            "already")
+        return None
 
     def start(self) -> ControlServer:
         """Bind the UNIX socket (and the TCP listener if configured), start accepting; returns self.
@@ -76,11 +91,18 @@ class ControlServer:
         self._accept_thread.start()
         return self
 
-    def close(self) -> None:
-        """Stop accepting, end every connection, remove the socket file; idempotent."""
+    def close(self, timeout_s: float = 2 * JOIN_TIMEOUT_S) -> None:
+        """Stop accepting, end every connection, remove the socket file; idempotent.
+
+        Ends within about ``timeout_s`` whatever the clients do: every connection's reading side
+        is shut at once (a blocked read returns, a stream sends its "end"), and after half of
+        ``timeout_s`` the connections still busy (writing to a client that does not read) are
+        shut both ways, all together.
+        """
         if self._closing.is_set():
             return
         self._closing.set()
+        deadline = time.monotonic() + timeout_s
         if self._wake_w >= 0:
             os.write(self._wake_w, b"x")
             self._accept_thread.join()
@@ -92,15 +114,18 @@ class ControlServer:
             unlink_if_ours(self.socket_path, self._inode)
         with self._lock:
             connections = dict(self._connections)
-        for sock in connections:  # a blocked read returns; a stream still sends its "end"
+        for sock in connections:
             with contextlib.suppress(OSError):
                 sock.shutdown(socket.SHUT_RD)
+        half = time.monotonic() + (deadline - time.monotonic()) / 2
+        for thread in connections.values():
+            thread.join(max(0.0, half - time.monotonic()))
         for sock, thread in connections.items():
-            thread.join(JOIN_TIMEOUT_S)
-            if thread.is_alive():  # writing to a client that does not read
+            if thread.is_alive():
                 with contextlib.suppress(OSError):
                     sock.shutdown(socket.SHUT_RDWR)
-                thread.join(JOIN_TIMEOUT_S)
+        for thread in connections.values():
+            thread.join(max(0.0, deadline - time.monotonic()))
             if thread.is_alive():
                 logger.warning("connection thread %s still busy at shutdown", thread.name)
 
@@ -135,12 +160,16 @@ class ControlServer:
                 sock.sendall(error_line(None, *refusal))
             sock.close()
             return
+        tcp = kind == "tcp"
         connection = Connection(sock, name, self._handler, self.config.max_request_bytes,
-                                self._closing, self._token if kind == "tcp" else None)
+                                self._closing, self._token if tcp else None,
+                                self._admit_authenticated if tcp else None)
         thread = threading.Thread(target=self._serve, args=(connection,), name=name,
                                   daemon=True)
         with self._lock:
             self._connections[sock] = thread
+            if tcp:
+                self._pending.add(sock)
         thread.start()
 
     def _admit(self, sock: socket.socket, kind: str) -> tuple[str, tuple[str, str] | None]:
@@ -148,6 +177,12 @@ class ControlServer:
         if kind == "tcp":
             host, port = sock.getpeername()[:2]
             name = f"tcp {host}:{port}"
+            with self._lock:
+                waiting = len(self._pending)
+            if waiting >= MAX_UNAUTHENTICATED:
+                return name, ("too_many_clients", f"{waiting} connections are authenticating "
+                                                  "already")
+            return name, None
         else:
             try:
                 peer = peer_credentials(sock)
@@ -169,5 +204,6 @@ class ControlServer:
         finally:
             with self._lock:
                 self._connections.pop(connection.sock, None)
+                self._pending.discard(connection.sock)
             connection.sock.close()
             logger.debug("%s: disconnected", connection.name)

@@ -28,14 +28,21 @@ from pathlib import Path
 from typing import Any
 
 from controller.devices import open_devices
-from controller.fine_positioner import FinePositioner
+from controller.fine_positioner import DATASETS, FinePositioner
 from controller.loop.iteration_log import IterationLog
 from controller.service.backoff import Backoff
 from controller.service.cell_connection import CellConnection, DeviceOpener
 from controller.service.commands import JOB_COMMANDS
 from controller.service.config_reload import restart_only_changes
 from controller.service.events import EventHub, Subscription
-from controller.service.jobs import BODIES, DEVICE_ERRORS, Job, JobContext, JobFailed, classify
+from controller.service.jobs import (
+    BODIES,
+    Job,
+    JobContext,
+    JobFailed,
+    classify,
+    is_disk_full,
+)
 from controller.service.listeners import read_token
 from controller.service.model_slot import DEFAULT_SYSTEM, ModelSlot
 from controller.service.peer import PeerPolicy
@@ -45,6 +52,7 @@ from controller.service.server import ControlServer
 from controller.service.states import JOB_STATES, State, StateMachine
 from controller.service.watchdog import WatchdogPinger
 from drivers.core.errors import ConfigError, FineposError
+from drivers.core.files import has_room, remove_stale_temp_files
 from drivers.core.typed_config import to_mapping
 
 logger = logging.getLogger(__name__)
@@ -88,6 +96,7 @@ class Service:
         self._backoff = Backoff(config.service.reconnect_initial_s, config.service.reconnect_max_s)
         self._next_reconnect_s = 0.0
         self._reconnected = False
+        self._stop_deadline_s = time.monotonic() + config.service.stop_timeout_s
 
     # -- lifecycle -----------------------------------------------------------------------------
     def stop(self) -> None:
@@ -108,6 +117,7 @@ class Service:
         policy = PeerPolicy.from_config(cfg.service.allowed_users, cfg.service.allowed_groups)
         token = read_token(cfg.service.tcp.token_file) if cfg.service.tcp is not None else None
         log_path = Path(cfg.controller.paths.log_dir) / ITERATION_LOG_NAME
+        self._remove_stale_temp_files()
         with contextlib.ExitStack() as stack:
             self._log = stack.enter_context(IterationLog(log_path))
             self._log.subscribe(self._on_record)
@@ -115,6 +125,7 @@ class Service:
             stack.callback(self._cell.close)
             self._server = stack.enter_context(
                 ControlServer(self.socket_path, cfg.service, policy, self, token))
+            stack.callback(lambda: self._server.close(self._stop_budget_s(0.6)))
             stack.callback(self._stop_job)
             self._fp = FinePositioner(None, cfg, log=self._log)
             self._open_devices()
@@ -122,11 +133,31 @@ class Service:
             state, _, reason = self._machine.snapshot()
             self._notifier.ready(f"{state.value}: {reason}")
             self._control_loop()
+            self._stop_deadline_s = time.monotonic() + cfg.service.stop_timeout_s
             with self._machine.lock:
                 self._machine.transition(State.STOPPING, "stop requested")
             self._notifier.stopping("stopping")
         logger.info("stopped")
         return 0
+
+    def job_still_running(self) -> bool:
+        """Whether a job thread outlived the shutdown (a ``train`` cannot be interrupted): the
+        caller must then end the process without running library finalizers under it."""
+        thread = self._job_thread
+        return thread is not None and thread.is_alive()
+
+    def _stop_budget_s(self, fraction: float) -> float:
+        """``fraction`` of the time left until the shutdown deadline (service.stop_timeout_s)."""
+        return max(0.0, (self._stop_deadline_s - time.monotonic()) * fraction)
+
+    def _remove_stale_temp_files(self) -> None:
+        """Remove what interrupted atomic writes (a kill during train or acquire) left behind."""
+        paths = self.config.controller.paths
+        probe = FinePositioner(None, self.config)
+        folders = {Path(paths.state_dir), Path(paths.log_dir),
+                   *(probe.dataset_path(name).parent for name in DATASETS)}
+        for folder in folders:
+            remove_stale_temp_files(folder)
 
     def _open_devices(self) -> None:
         try:
@@ -154,11 +185,11 @@ class Service:
             job, thread = self._job, self._job_thread
         if job is None or thread is None:
             return
-        self._abort_job(job)
-        thread.join(self.config.service.stop_timeout_s)
+        self._abort_job(job, self._stop_budget_s(0.3))
+        thread.join(self._stop_budget_s(0.5))
         if thread.is_alive():
-            logger.error("job %d (%s) still running after %.1f s; closing the devices under it",
-                         job.id, job.kind, self.config.service.stop_timeout_s)
+            logger.error("job %d (%s) still running at shutdown; closing the devices under it",
+                         job.id, job.kind)
             job.finish("aborted", "the service stopped while the job was still running")
 
     # -- the control loop ----------------------------------------------------------------------
@@ -168,12 +199,18 @@ class Service:
         while not self._stop.is_set():
             now_s = time.monotonic()
             cfg = self.config.service
-            if self._reload.is_set():
-                self._reload_if_idle()
-            self._reconnect_if_due(now_s)
-            if cfg.idle_poll_s > 0 and now_s >= next_poll_s:
-                next_poll_s = now_s + cfg.idle_poll_s
-                self._poll_arm()
+            try:
+                if self._reload.is_set():
+                    self._reload_if_idle()
+                self._reconnect_if_due(now_s)
+                if cfg.idle_poll_s > 0 and now_s >= next_poll_s:
+                    next_poll_s = now_s + cfg.idle_poll_s
+                    self._poll_arm()
+            except Exception as exc:  # the service never exits on a device or file error
+                logger.exception("control loop")
+                with self._machine.lock:
+                    if self._machine.state is State.IDLE:
+                        self._enter_fault(f"control loop: {type(exc).__name__}: {exc}")
             busy_s = self._cell.arm.busy_for_s() if self._cell.arm is not None else 0.0
             watchdog.tick(now_s, busy_s, cfg.stall_timeout_s)
             self._wake.wait(min(s for s in (TICK_S, watchdog.interval_s, cfg.idle_poll_s) if s))
@@ -186,7 +223,7 @@ class Service:
         try:
             if self._machine.state is State.IDLE and self._cell.arm is not None:
                 self._cell.arm.pose()
-        except DEVICE_ERRORS as exc:
+        except (FineposError, OSError) as exc:
             with self._machine.lock:
                 if self._machine.state is State.IDLE:
                     self._enter_fault(f"arm check while idle: {type(exc).__name__}: {exc}")
@@ -195,8 +232,12 @@ class Service:
 
     def _reconnect_if_due(self, now_s: float) -> None:
         with self._machine.lock:
-            if self._machine.state is not State.FAULT or self._reconnected or \
-                    now_s < self._next_reconnect_s:
+            if self._machine.state is not State.FAULT or now_s < self._next_reconnect_s:
+                return
+            if self._fault is not None and self._fault.get("code") == "disk_full":
+                self._resume_if_space(now_s)
+                return
+            if self._reconnected:
                 return
         with self._device_lock:
             try:
@@ -217,9 +258,25 @@ class Service:
         logger.info("devices reconnected; send reset to resume")
         self._notifier.status("fault: devices reconnected; send reset to resume")
 
-    def _enter_fault(self, reason: str) -> None:
-        """Go to (or stay in) fault for ``reason``; call with the state lock held."""
-        self._fault = {"reason": reason, "since": time.time()}
+    def _resume_if_space(self, now_s: float) -> None:
+        """In a ``disk_full`` fault: go idle once the log and state folders have room again (lock
+        held)."""
+        paths = self.config.controller.paths
+        if all(has_room(folder) for folder in (paths.log_dir, paths.state_dir)):
+            self._fault = None
+            self._machine.transition(State.IDLE, "disk space is back: the iteration log "
+                                                 "writes again")
+        else:
+            self._next_reconnect_s = now_s + self._backoff.next_delay_s()
+
+    def _enter_fault(self, reason: str, code: str = "device") -> None:
+        """Go to (or stay in) fault for ``reason``; call with the state lock held.
+
+        ``code``: ``device`` (a reset reconnects the devices) or ``disk_full`` (the iteration
+        log, a dataset or a model did not fit; the service goes idle by itself once the log and
+        state folders have room again).
+        """
+        self._fault = {"code": code, "reason": reason, "since": time.time()}
         cfg = self.config.service
         self._backoff = Backoff(cfg.reconnect_initial_s, cfg.reconnect_max_s)
         self._next_reconnect_s = time.monotonic() + self._backoff.next_delay_s()
@@ -248,8 +305,10 @@ class Service:
             fp = FinePositioner(self._cell.job_devices() if self._cell.is_open else None, new,
                                 log=self._log)
             model = fp.load_model(system=system) if system is not None else None
-        except (FineposError, OSError) as exc:
-            self._reloaded(False, f"refused, the old config and model stay: {exc}")
+        except Exception as exc:  # noqa: BLE001 - whatever the file holds, the old config stays
+            detail = str(exc) if isinstance(exc, (FineposError, OSError)) else \
+                f"{type(exc).__name__}: {exc}"
+            self._reloaded(False, f"refused, the old config and model stay: {detail}")
             return
         with self._machine.lock:
             if self._job is not None:  # a job started meanwhile: apply after it
@@ -391,7 +450,9 @@ class Service:
             self._last_job = job.report()
             self._job = None
             if self._machine.state is not State.STOPPING:
-                if outcome == "fault":
+                if is_disk_full(exc):
+                    self._enter_fault(f"{job.kind} job {job.id}: {reason}", "disk_full")
+                elif outcome == "fault":
                     self._enter_fault(f"{job.kind} job {job.id}: {reason}")
                 else:
                     detail = "" if outcome == "done" else f": {reason}"
@@ -399,20 +460,49 @@ class Service:
                                              f"job {job.id} ({job.kind}) {outcome}{detail}")
         self._wake.set()
 
-    def _abort_job(self, job: Job) -> str | None:
+    def _abort_job(self, job: Job, wait_s: float) -> str | None:
         """Preempt ``job`` and halt the arm; returns why halting failed, if it did."""
         job.abort.set()
         if self._cell.arm is not None:
             self._cell.arm.preempt()
-        try:
-            if self._fp is not None and self._fp.devices is not None:
-                self._fp.abort()
-            elif self._cell.arm is not None:
-                self._cell.arm.halt()
-        except FineposError as exc:
-            logger.error("halt failed: %s", exc)
-            return f"{type(exc).__name__}: {exc}"
-        return None
+        fp = self._fp
+        if fp is not None and fp.devices is not None:
+            return self._halt(fp.abort, wait_s)
+        return self._halt(self._cell.arm.halt, wait_s) if self._cell.arm is not None else None
+
+    def _halt(self, halt: Callable[[], None], wait_s: float) -> str | None:
+        """Run ``halt`` in its own thread and wait at most ``wait_s`` for it.
+
+        Returns None once it succeeded, else why not (its error, or that it is still waiting for
+        the arm's reply: a dead link must not hold up an abort or a shutdown; the outcome then
+        comes as a ``halt`` event and in the log).
+        """
+        outcome: list[str | None] = []
+
+        def run() -> None:
+            try:
+                halt()
+                outcome.append(None)
+            except Exception as exc:  # noqa: BLE001 - reported, never raised into a thread
+                outcome.append(f"{type(exc).__name__}: {exc}")
+            if late.is_set():
+                (logger.info if outcome[0] is None else logger.error)(
+                    "late halt: %s", outcome[0] or "done")
+                self._hub.publish({"event": "halt", "ok": outcome[0] is None,
+                                   "error": outcome[0], "time": time.time()})
+
+        late = threading.Event()
+        thread = threading.Thread(target=run, name="halt", daemon=True)
+        thread.start()
+        thread.join(wait_s)
+        if not outcome:
+            late.set()
+            if outcome:  # finished between the join and the flag
+                return outcome[0]
+            return f"no reply to the halt within {wait_s:g} s; still waiting (see the halt event)"
+        if outcome[0] is not None:
+            logger.error("halt failed: %s", outcome[0])
+        return outcome[0]
 
     def abort(self) -> dict[str, Any]:
         """Preempt the running job (if any) and halt the arm. Training moves nothing and
@@ -420,15 +510,12 @@ class Service:
         with self._machine.lock:
             job = self._job
         preempt = job is not None and job.kind != "train"
+        wait_s = self.config.service.abort_wait_s
         if preempt:
             logger.warning("abort requested: job %d (%s)", job.id, job.kind)
-            halt_error = self._abort_job(job)
+            halt_error = self._abort_job(job, wait_s)
         elif self._cell.arm is not None:
-            halt_error = None
-            try:
-                self._cell.arm.halt()
-            except FineposError as exc:
-                halt_error = f"{type(exc).__name__}: {exc}"
+            halt_error = self._halt(self._cell.arm.halt, wait_s)
         else:
             halt_error = "no devices open"
         answer = {"aborted": job.report() if preempt else None,

@@ -11,7 +11,11 @@ Errors, by cause:
 - any other controller error, or a program HOLD: DeviceFaultError carrying the message;
 - no complete reply within the timeout: DeviceTimeoutError;
 - line noise, a missing echo, an unexpected question or output: ProtocolError;
-- a broken link: DeviceFaultError.
+- a broken link: DeviceFaultError;
+- a command whose reply was still awaited when ``halt()`` was called: MotionRejectedError (the
+  halt interrupts the wait, see ``ValLink.interrupt``; no fault).
+A controller error in reply to a reading (``where``) is always a DeviceFaultError, never a
+rejection.
 After a command, all but the first put the arm into FAULT: it refuses motion until ``reset()``
 reconnects. During ``connect()`` they are raised and the arm stays disconnected.
 """
@@ -32,7 +36,7 @@ from drivers.core.pose import Pose
 from drivers.interfaces import Arm
 from drivers.safety import SafetyLimits
 from drivers.val.config import ValConfig
-from drivers.val.link import ValLink
+from drivers.val.link import ExchangeInterrupted, ValLink
 from drivers.val.replies import Reply, ReplyKind
 from drivers.val.where import WhereReading, parse_where
 
@@ -91,23 +95,30 @@ class ValArm(Arm):
         """Put the arm into FAULT when the exchange for ``line`` fails (not when refused)."""
         try:
             yield
+        except ExchangeInterrupted as exc:  # a halt (or close) cut the wait short: no fault
+            raise MotionRejectedError(f"halted while waiting for {line!r}") from exc
         except (DeviceTimeoutError, ProtocolError, DeviceFaultError) as exc:
             self.mark_fault(f"{line!r}: {exc}")
             raise
 
-    def _command(self, line: str, timeout_s: float | None = None) -> Reply:
-        """Send one command and return its OK reply."""
+    def _command(self, line: str, timeout_s: float | None = None, motion: bool = True) -> Reply:
+        """Send one command and return its OK reply (``motion``: see ``_check``)."""
         reply = self.link.exchange(line, timeout_s or self.config.exchange_timeout_s,
                                    echo=self.config.echo)
-        return self._check(reply, line)
+        return self._check(reply, line, motion)
 
-    def _check(self, reply: Reply, line: str) -> Reply:
-        """Return an OK reply; raise the typed error for every other kind."""
+    def _check(self, reply: Reply, line: str, motion: bool = True) -> Reply:
+        """Return an OK reply; raise the typed error for every other kind.
+
+        A ``rejection_errors`` text is a refusal (MotionRejectedError) only for a command that
+        asks for motion (``motion``); answering a reading such as ``where`` with it is a
+        controller fault (DeviceFaultError), never a rejected step.
+        """
         if reply.kind is ReplyKind.OK:
             return reply
         if reply.kind is ReplyKind.ERROR:
             message = reply.message.casefold()
-            if any(text.casefold() in message for text in self.config.rejection_errors):
+            if motion and any(text.casefold() in message for text in self.config.rejection_errors):
                 logger.warning("VAL refused %r: %s", line, reply.message)
                 raise MotionRejectedError(reply.message)
             raise DeviceFaultError(reply.message)
@@ -131,7 +142,7 @@ class ValArm(Arm):
     def _where(self) -> WhereReading:
         line = self.config.commands.where
         with self._faulting(line):
-            return parse_where(self._command(line).lines)
+            return parse_where(self._command(line, motion=False).lines)
 
     # -- Arm backend -------------------------------------------------------------------------
     def _read_pose(self) -> Pose:
@@ -140,12 +151,16 @@ class ValArm(Arm):
     def _move_to(self, target: Pose) -> Pose:
         line = self.config.commands.move.format(**target.as_dict())
         self._command_without_output(line, self.config.move_timeout_s)
-        return self._where().pose
+        # The prompt comes when the move is done (confirmed): reading back is optional.
+        return self._where().pose if self.config.where_after_move else target
 
     def _set_speed(self, percent: float) -> None:
         self._command_without_output(self.config.commands.speed.format(percent=percent))
 
     def _halt(self) -> None:
+        # A move blocks its exchange until the prompt returns (or move_timeout_s on a dead
+        # link): cut that wait short so the halt goes out now.
+        self.link.interrupt()
         self._command_without_output(self.config.commands.halt)
 
     def _set_gripper(self, closed: bool) -> float:

@@ -19,6 +19,8 @@ from drivers.core.pose import Pose
 _CARTESIAN = ("X", "Y", "Z", "O", "A", "T")
 _JOINTS = ("JT1", "JT2", "JT3", "JT4", "JT5", "JT6")
 _COMBINED = tuple(f"{c}/{j}" for c, j in zip(_CARTESIAN, _JOINTS, strict=True))
+# No PUMA pose or joint value comes near this (mm or deg); beyond it the line is noise.
+_MAX_ABS = 1e5
 _NUMBER = re.compile(r"[+-]?(?:\d+\.?\d*|\.\d+)(?:[eE][+-]?\d+)?")
 
 
@@ -43,7 +45,7 @@ def _values(lines: Sequence[str], header_index: int, what: str, offset: int = 1)
         raise ProtocolError(f"where: expected six numbers after the {what} header, got "
                             f"{lines[index][:80]!r}")
     values = [float(f) for f in fields]
-    if not all(math.isfinite(v) for v in values):
+    if not all(math.isfinite(v) and abs(v) <= _MAX_ABS for v in values):
         raise ProtocolError(f"where: {what} values out of range: {lines[index][:80]!r}")
     return values
 

@@ -111,3 +111,21 @@ def test_corrupt_truncated_pickled_or_foreign_files_are_refused(tmp_path):
         Dataset.load(tmp_path / "wrong_version.npz")
     with pytest.raises(DatasetError, match="cannot read"):
         Dataset.load(tmp_path / "missing.npz")
+
+
+def test_labels_beyond_any_grid_are_refused_at_load(tmp_path):
+    """Issue 15: a set with labels of 1e308 is refused with one line, not a traceback at train."""
+    import numpy as np
+    import pytest as _pytest
+
+    from calibration_free.dataset import Dataset
+    from calibration_free.errors import DatasetError
+
+    good = Dataset(np.zeros((2, 3)))
+    good.save(tmp_path / "nn1.npz")
+    with np.load(tmp_path / "nn1.npz") as npz:
+        arrays = {k: npz[k] for k in npz.files}
+    arrays["labels"] = np.array([[1e308, 0.0, 0.0], [0.0, 0.0, 0.0]])
+    np.savez(tmp_path / "bad.npz", **arrays)
+    with _pytest.raises(DatasetError, match=r"bad\.npz: labels: dx_mm reaches 1e\+308"):
+        Dataset.load(tmp_path / "bad.npz")

@@ -55,3 +55,47 @@ def test_edited_header_fails_the_checksum(good):
     good.write_bytes(data.replace(b"cube", b"cubo"))  # still valid JSON, same length
     with pytest.raises(BundleError, match="checksum"):
         read_model(good, "pca", 1)
+
+
+# -- hardening (issue 15): hostile model files give one line naming the file and the problem -----
+def _one_line_error(path) -> str:
+    import pytest as _pytest
+
+    from calibration_free.errors import BundleError
+    from calibration_free.model_file import read_model
+
+    with _pytest.raises(BundleError) as refused:
+        read_model(path, "gabor", 1)
+    message = str(refused.value)
+    assert "\n" not in message and str(path) in message and len(message) < 400, message
+    return message
+
+
+def test_model_from_a_fifo_or_dev_zero_is_refused_at_once(tmp_path):
+    import os
+
+    fifo = tmp_path / "fifo.fpm"
+    os.mkfifo(fifo)
+    assert "FIFO" in _one_line_error(fifo)
+    zero = tmp_path / "zero.fpm"
+    zero.symlink_to("/dev/zero")
+    assert "character device" in _one_line_error(zero)
+
+
+def test_every_flipped_header_byte_gives_one_line_without_the_header(tmp_path):
+    import numpy as np
+
+    from calibration_free.model_file import write_model
+
+    path = tmp_path / "m.fpm"
+    write_model(path, "gabor", 1, {"object_kind": "cube", "secret": "HEADERTEXT" * 5},
+                {"w": np.arange(6.0)})
+    data = path.read_bytes()
+    header_len = int.from_bytes(data[:8], "little")
+    bad = tmp_path / "bad.fpm"
+    for offset in range(0, 8 + header_len, 7):
+        flipped = bytearray(data)
+        flipped[offset] ^= 0x80
+        bad.write_bytes(bytes(flipped))
+        message = _one_line_error(bad)  # anything but a BundleError fails here
+        assert "HEADERTEXT" not in message, (offset, message)

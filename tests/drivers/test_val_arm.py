@@ -203,3 +203,47 @@ def test_controller_error_at_startup_leaves_the_arm_disconnected(emulator):
     emulator.set_faults(ValFaults())
     with arm:
         assert arm.pose().is_finite()
+
+
+def test_an_error_reply_to_where_is_a_device_fault_never_a_rejection(emulator, backing):
+    """Issue 15 probe 3: ``*Position out of range*`` answering a pose read is a controller fault
+    (the service's idle poll must not take it for a refused step, nor exit on it)."""
+    with make_arm(emulator.url) as arm:
+        emulator.set_faults(ValFaults(forced_error="Position out of range"))
+        with pytest.raises(DeviceFaultError, match="Position out of range") as raised:
+            arm.pose()
+        assert not isinstance(raised.value, MotionRejectedError)
+        assert arm.state is Lifecycle.FAULT
+        emulator.set_faults(ValFaults())
+        arm.reset()
+        arm.activate()
+        arm.pose()
+
+
+def test_halt_interrupts_a_move_waiting_on_a_silent_link(emulator, backing):
+    """Issue 15 probe 4: a halt does not wait behind a move whose reply never comes; the move
+    ends as refused (no fault from the interruption), the halt gets its own timeout."""
+    import threading
+    import time
+
+    with make_arm(emulator.url, exchange_timeout_s=0.3, move_timeout_s=30.0) as arm:
+        emulator.set_faults(ValFaults(drop_link_after_lines=1))  # the `where` of the move only
+        errors = []
+
+        def move() -> None:
+            try:
+                arm.move_tool(STEP)
+            except Exception as exc:  # noqa: BLE001 - checked below
+                errors.append(exc)
+
+        thread = threading.Thread(target=move)
+        thread.start()
+        time.sleep(0.3)  # the move command is waiting for its prompt
+        with pytest.raises(DeviceTimeoutError):
+            arm.halt()  # the link is still silent: the halt times out (not 30 s later)
+        thread.join(5.0)
+        assert not thread.is_alive()
+        assert errors and isinstance(errors[0], MotionRejectedError), errors
+        assert "halted while waiting" in str(errors[0])
+        assert arm.state is Lifecycle.FAULT  # from the halt's own timeout
+        arm.disconnect()  # closing never raises, also with the link down

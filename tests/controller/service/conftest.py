@@ -46,7 +46,9 @@ def service_config(tmp_path: Path, socket_dir: Path, **sections):
         "controller": {"paths": {"state_dir": str(tmp_path / "state"),
                                  "log_dir": str(tmp_path / "log")},
                        "acquisition": {"nn1": {"shape": [2, 2, 2]}, "nn2": {"shape": [2, 2, 2]},
-                                       "test_count": 4}},
+                                       "test_count": 4},
+                       # The fakes have no part to weigh; their gripper reports the width.
+                       "grasp": {"check": "width"}},
         "service": {"socket_path": str(socket_dir / "fp.sock"), "idle_poll_s": 0.0,
                     "reconnect_initial_s": 0.05, "reconnect_max_s": 0.2,
                     "stop_timeout_s": 1.0},

@@ -67,3 +67,59 @@ def test_yaml_file_errors(tmp_path):
         load_yaml_file(lst)
     with pytest.raises(ConfigError, match="cannot read"):
         load_yaml_file(tmp_path / "missing.yaml")
+
+
+# -- hardening (issue 15): a config file that cannot be loaded gives one ConfigError line --------
+def _load_error(path) -> str:
+    import pytest as _pytest
+
+    from drivers.core.errors import ConfigError
+    from drivers.core.typed_config import load_yaml_file
+
+    with _pytest.raises(ConfigError) as refused:
+        load_yaml_file(path)
+    message = str(refused.value)
+    assert message.startswith(str(path)) and "\n" not in message, message
+    return message
+
+
+def test_non_utf8_config_names_the_byte_and_line(tmp_path):
+    path = tmp_path / "finepos.yaml"
+    path.write_bytes(b"service:\n  idle_poll_s: 2.0\n# caf\xe9\n")
+    assert "not UTF-8 text (byte 0xe9 on line 3)" in _load_error(path)
+
+
+def test_fifo_device_and_huge_configs_are_refused_at_once(tmp_path):
+    import os
+
+    fifo = tmp_path / "fifo.yaml"
+    os.mkfifo(fifo)
+    assert "not a regular file" in _load_error(fifo)
+    zero = tmp_path / "zero.yaml"
+    zero.symlink_to("/dev/zero")
+    assert "not a regular file" in _load_error(zero)
+    big = tmp_path / "big.yaml"
+    big.write_bytes(b"#" * ((1 << 20) + 1))
+    assert "larger than" in _load_error(big)
+
+
+def test_bad_yaml_is_one_line(tmp_path):
+    path = tmp_path / "finepos.yaml"
+    path.write_text("service:\n  idle_poll_s: [1,\n  x: {\n")
+    assert "not valid YAML" in _load_error(path)
+
+
+def test_sizes_have_upper_limits_that_fit_the_machine():
+    import pytest as _pytest
+
+    from controller.config import config_from_mapping
+    from drivers.core.errors import ConfigError
+
+    for data, key in (({"perception": {"nn2_hidden": [100000000]}}, "perception.nn2_hidden"),
+                      ({"perception": {"nn2_hidden": [8] * 9}}, "nn2_hidden"),
+                      ({"perception": {"gabor": {"roi_px": 100000000}}},
+                       "perception.gabor.roi_px"),
+                      ({"service": {"stop_timeout_s": 1e308}}, "service.stop_timeout_s"),
+                      ({"service": {"abort_wait_s": float("inf")}}, "service.abort_wait_s")):
+        with _pytest.raises(ConfigError, match=key.replace(".", r"\.")):
+            config_from_mapping(data)
