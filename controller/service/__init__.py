@@ -52,6 +52,15 @@ credentials (SO_PEERCRED, SO_PEERGROUPS) must match the service's own user,
 and is disconnected. There is no network listener unless ``service.tcp`` is configured; that one
 binds to loopback only and requires ``auth`` with the token from ``service.tcp.token_file``.
 
+Load and limits: ``status`` is answered from a snapshot rebuilt only when its inputs change
+(``snapshot``); each connection's answers are paced to ``service.request_rate_hz`` after a burst
+of ``request_burst`` (``pacing``; ``abort`` never is), so a fast poller slows only itself. A
+connection silent for ``idle_timeout_s`` (streams excepted), or whose request line is not whole
+``request_timeout_s`` after its first byte, is closed. At most ``max_clients`` connections, and
+``max_clients_per_uid`` per peer uid, are served; an authorised peer over either limit may still
+send one ``abort`` or ``status`` (answered by the accept thread, up to ``max_waiting`` such
+peers at once, each for ``request_timeout_s``), so idle connections never lock out an abort.
+
 Faults: ``status.fault.code`` is ``device`` (a device error; ``reset`` reconnects) or
 ``disk_full`` (the iteration log cannot be written; idle again by itself once there is room).
 The service never exits on a device or file error.
@@ -67,6 +76,7 @@ Modules: ``service`` (the Service: state, jobs, control loop), ``server`` and ``
 (the socket side), ``protocol`` and ``commands`` (wire format and validation), ``listeners``,
 ``peer`` (who may connect), ``jobs`` and ``model_slot`` (what jobs do), ``job_arm`` (the
 preemptible arm), ``cell_connection`` (devices: open, recover, probe), ``events`` (the stream),
-``states``, ``backoff``, ``watchdog``, ``sd_notify``, ``signals``, ``config`` (the ``service:``
-config section), ``config_reload``, ``client``, ``bench`` (``finepos bench service``).
+``states``, ``backoff``, ``pacing``, ``snapshot``, ``watchdog``, ``sd_notify``, ``signals``,
+``config`` (the ``service:`` config section), ``config_reload``, ``client``, ``bench``
+(``finepos bench service``).
 """

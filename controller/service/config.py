@@ -48,6 +48,15 @@ class ServiceConfig:
     service's own user; names or numeric ids; a peer is allowed when its uid is listed or its
     primary or a supplementary group is;
     max_request_bytes: longest request line; max_clients: connections served at once;
+    request_rate_hz / request_burst: each connection's answers are paced to this rate after a
+    burst of this many (``controller.service.pacing``; ``abort`` is never paced; 0 Hz: off);
+    idle_timeout_s: a connection that sends no request for this long is closed (``stream``
+    connections excepted); request_timeout_s: a request line must be complete this long after
+    its first byte (a byte-a-second peer is closed);
+    max_clients_per_uid: connections served at once per peer uid (TCP peers count as one);
+    max_waiting: authorised peers over either limit still connect, up to this many, and may
+    send one ``abort`` or ``status`` within request_timeout_s (answered by the accept thread,
+    so idle connections can never lock out an abort); anything else gets too_many_clients;
     idle_poll_s: while idle, read the arm's pose this often to notice a lost link (0: never);
     reconnect_initial_s / reconnect_max_s: backoff between reconnection attempts after a fault
     (doubling from the first to the second);
@@ -70,6 +79,12 @@ class ServiceConfig:
     allowed_groups: tuple[int | str, ...] = ()
     max_request_bytes: int = field(default=16384, metadata={"min": 512, "max": 1 << 20})
     max_clients: int = field(default=32, metadata={"min": 1, "max": 1024})
+    request_rate_hz: float = field(default=20.0, metadata={"min": 0.0, "max": 1e6})
+    request_burst: int = field(default=5, metadata={"min": 1, "max": 10000})
+    idle_timeout_s: float = field(default=60.0, metadata={**_POSITIVE, "max": 86400.0})
+    request_timeout_s: float = field(default=5.0, metadata={**_POSITIVE, "max": 3600.0})
+    max_clients_per_uid: int = field(default=8, metadata={"min": 1, "max": 1024})
+    max_waiting: int = field(default=256, metadata={"min": 1, "max": 4096})
     idle_poll_s: float = field(default=2.0, metadata={"min": 0.0})
     reconnect_initial_s: float = field(default=0.5, metadata=_POSITIVE)
     reconnect_max_s: float = field(default=30.0, metadata=_POSITIVE)

@@ -10,7 +10,9 @@ A reload that changes any of those is refused as a whole.
 from __future__ import annotations
 
 RESTART_SECTIONS = ("arm", "camera", "wrench", "scene")
-RESTART_SERVICE_KEYS = ("socket_path", "socket_group", "max_request_bytes", "max_clients", "tcp")
+RESTART_SERVICE_KEYS = ("socket_path", "socket_group", "max_request_bytes", "max_clients", "tcp",
+                        "max_clients_per_uid", "max_waiting", "idle_timeout_s",
+                        "request_timeout_s", "request_rate_hz", "request_burst")
 
 
 def restart_only_changes(old, new) -> list[str]:

@@ -21,9 +21,11 @@ from collections.abc import Callable
 from typing import Any, Protocol
 
 from controller.service.events import Subscription
+from controller.service.pacing import RequestPacer
 from controller.service.protocol import (
     TOO_LARGE,
     LineReader,
+    PeerTimeout,
     Request,
     RequestError,
     decode,
@@ -61,17 +63,23 @@ class Connection:
 
     def __init__(self, sock: socket.socket, name: str, handler: RequestHandler, max_bytes: int,
                  closing: threading.Event, token: str | None = None,
-                 admit: Callable[[Connection], tuple[str, str] | None] | None = None) -> None:
+                 admit: Callable[[Connection], tuple[str, str] | None] | None = None,
+                 pacer: RequestPacer | None = None, idle_timeout_s: float | None = None,
+                 line_timeout_s: float | None = None) -> None:
         """``admit`` (TCP): called once the token was accepted; returns (code, message) to
-        refuse the now authenticated connection (the server's client limit), else None."""
+        refuse the now authenticated connection (the server's client limit), else None.
+        ``pacer``: spaces this connection's answers (all but ``abort``'s); None: unpaced.
+        ``idle_timeout_s`` / ``line_timeout_s``: see ``protocol.LineReader`` (a peer that times
+        out is disconnected; a ``stream`` connection has no idle timeout)."""
         self.sock = sock
         self.name = name
         self._handler = handler
-        self._reader = LineReader(sock, max_bytes)
+        self._reader = LineReader(sock, max_bytes, idle_timeout_s, line_timeout_s)
         self._max_bytes = max_bytes
         self._closing = closing
         self._token = token  # None: authenticated by its peer credentials already
         self._admit = admit
+        self._pacer = pacer
         self._auth_timer: threading.Timer | None = None
         if token is not None:
             self._auth_timer = threading.Timer(AUTH_TIMEOUT_S, self._auth_expired)
@@ -94,6 +102,8 @@ class Connection:
             self._auth_timer.start()
         try:
             self._serve()
+        except PeerTimeout as exc:
+            logger.info("%s: disconnected: %s", self.name, exc)
         except OSError as exc:  # the client went away mid-write, or the server shut us down
             logger.debug("%s: connection ended: %s", self.name, exc)
         finally:
@@ -106,7 +116,7 @@ class Connection:
             if line is None:
                 return
             if line is TOO_LARGE:
-                self._send(error_line(None, "too_large",
+                self._paced_send(error_line(None, "too_large",
                                       f"request longer than {self._max_bytes} bytes"))
                 continue
             data = None
@@ -114,14 +124,14 @@ class Connection:
                 data = decode(line)
                 request = parse_request(data)
             except RequestError as exc:
-                self._send(error_line(request_id(data), exc.code, exc.message))
+                self._paced_send(error_line(request_id(data), exc.code, exc.message))
                 if self._token is not None:
                     return  # not authenticated: no second chance on this connection
                 continue
             except Exception as exc:  # a parser bug must not end the connection unanswered
                 logger.exception("%s: parsing a request failed", self.name)
-                self._send(error_line(request_id(data), "bad_request",
-                                      f"request not understood: {type(exc).__name__}"))
+                self._paced_send(error_line(request_id(data), "bad_request",
+                                            f"request not understood: {type(exc).__name__}"))
                 if self._token is not None:
                     return
                 continue
@@ -133,9 +143,12 @@ class Connection:
                 self._stream(request.id)
                 return
             if request.cmd == "auth":
-                self._send(ok_line(request.id, {"authenticated": True}))
+                self._paced_send(ok_line(request.id, {"authenticated": True}))
                 continue
-            self._send(self._answer(request))
+            if request.cmd == "abort":
+                self._send(self._answer(request))  # never paced: it must always get through
+            else:
+                self._paced_send(self._answer(request))
 
     def _answer(self, request: Request) -> bytes:
         try:
@@ -167,6 +180,7 @@ class Connection:
         return False
 
     def _stream(self, rid: str | int | None) -> None:
+        self.sock.settimeout(None)  # a listener may stay quiet for ever
         subscription = self._handler.subscribe()
         try:
             self._send(ok_line(rid, {"streaming": True}))
@@ -186,6 +200,13 @@ class Connection:
             return self.sock.recv(4096, socket.MSG_DONTWAIT) == b""
         except BlockingIOError:
             return False
+
+    def _paced_send(self, data: bytes) -> None:
+        """Send after the pacer's delay (sleeping, so a fast poller slows only itself)."""
+        delay_s = self._pacer.delay_s() if self._pacer is not None else 0.0
+        if delay_s > 0 and self._closing.wait(delay_s):
+            return  # the service is stopping: the connection ends without this answer
+        self._send(data)
 
     def _send(self, data: bytes) -> None:
         self.sock.sendall(data)

@@ -31,6 +31,10 @@ class ModelSlot:
         with self._lock:
             return dict(self._info) if self._info else None
 
+    def marker(self) -> object:
+        """An object that is replaced whenever another model is put into use."""
+        return self._info
+
     def set(self, model: TrainedModel, path: Path) -> None:
         """Put ``model`` into use; ``path`` is its file, reported by ``info`` with the time."""
         with self._lock:

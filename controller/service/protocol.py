@@ -11,6 +11,7 @@ from __future__ import annotations
 
 import json
 import socket
+import time
 from dataclasses import dataclass
 from typing import Any
 
@@ -30,7 +31,8 @@ ERROR_CODES = {
     "bad_request": "the envelope or an argument is missing, of the wrong type or out of range",
     "unknown_command": "cmd names no command",
     "unauthorized": "the peer is not allowed, or a TCP connection did not authenticate",
-    "too_many_clients": "service.max_clients connections are open already",
+    "too_many_clients": "service.max_clients (or max_clients_per_uid) connections are open "
+                        "already: only one abort or status is answered on this connection",
     "not_ready": "the service is still starting",
     "busy": "a job is running (abort it, or wait for it to end)",
     "fault": "the service is in fault: motion is refused until a reset succeeds",
@@ -108,8 +110,16 @@ def parse_request(data: Any) -> Request:
         raise RequestError("bad_request", f"{cmd}: {exc}") from exc
 
 
-def ok_line(request_id_: str | int | None, result: dict[str, Any]) -> bytes:
+class EncodedResult(bytes):
+    """A result already encoded as one JSON object (e.g. the ``status`` snapshot): ``ok_line``
+    splices it in as is instead of encoding it for every request."""
+
+
+def ok_line(request_id_: str | int | None, result: dict[str, Any] | EncodedResult) -> bytes:
     """The success response line (newline-terminated bytes) carrying ``result``."""
+    if isinstance(result, EncodedResult):
+        return b"".join((b'{"id":', json.dumps(request_id_).encode(), b',"ok":true,"result":',
+                         result, b"}\n"))
     return (to_json_line({"id": request_id_, "ok": True, "result": result}) + "\n").encode()
 
 
@@ -124,23 +134,59 @@ def event_line(event: dict[str, Any]) -> bytes:
     return (to_json_line(event) + "\n").encode()
 
 
-class LineReader:
-    """Splits what a socket receives into request lines of at most ``max_bytes``."""
+class PeerTimeout(Exception):
+    """The peer sent no request for ``idle_timeout_s``, or a line took over ``line_timeout_s``."""
 
-    def __init__(self, sock: socket.socket, max_bytes: int) -> None:
+
+class LineReader:
+    """Splits what a socket receives into request lines of at most ``max_bytes``.
+
+    ``idle_timeout_s``: longest wait for the first byte of a request; ``line_timeout_s``: a line
+    must be complete this long after its first byte (bytes trickling in do not extend it); both
+    raise PeerTimeout (None: wait for ever).
+    """
+
+    def __init__(self, sock: socket.socket, max_bytes: int, idle_timeout_s: float | None = None,
+                 line_timeout_s: float | None = None) -> None:
         self._sock = sock
         self._max_bytes = max_bytes
         self._buffer = bytearray()
         self._skipping = False
+        self._idle_timeout_s = idle_timeout_s
+        self._line_timeout_s = line_timeout_s
+        self._line_deadline_s: float | None = None
+
+    def _recv(self) -> bytes:
+        if self._buffer or self._skipping:
+            if self._line_deadline_s is None and self._line_timeout_s is not None:
+                self._line_deadline_s = time.monotonic() + self._line_timeout_s
+            timeout_s = None if self._line_deadline_s is None else \
+                self._line_deadline_s - time.monotonic()
+            what = f"a request line not complete within {self._line_timeout_s} s"
+        else:
+            timeout_s, what = self._idle_timeout_s, f"no request for {self._idle_timeout_s} s"
+        if timeout_s is not None and timeout_s <= 0:
+            raise PeerTimeout(what)
+        if self._idle_timeout_s is not None or self._line_timeout_s is not None:
+            self._sock.settimeout(timeout_s)
+        try:
+            return self._sock.recv(_RECV_BYTES)
+        except TimeoutError as exc:
+            raise PeerTimeout(what) from exc
 
     def read(self) -> bytes | object | None:
         """The next line (without its newline), TOO_LARGE for one over the limit, or None at
-        the end of the stream (an unterminated last line is dropped)."""
+        the end of the stream (an unterminated last line is dropped).
+
+        Raises:
+            PeerTimeout: see the class docstring.
+        """
         while True:
             end = self._buffer.find(b"\n")
             if end >= 0:
                 line = bytes(self._buffer[:end])
                 del self._buffer[:end + 1]
+                self._line_deadline_s = None  # (the rest of the buffer: a fresh line's clock)
                 if self._skipping or end + 1 > self._max_bytes:
                     self._skipping = False
                     return TOO_LARGE
@@ -148,7 +194,7 @@ class LineReader:
             if len(self._buffer) >= self._max_bytes:
                 self._skipping = True
                 self._buffer.clear()
-            chunk = self._sock.recv(_RECV_BYTES)
+            chunk = self._recv()
             if not chunk:
                 return None
             self._buffer += chunk

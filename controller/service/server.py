@@ -4,9 +4,14 @@ each UNIX peer's credentials, and serves every connection in its own thread.
 An accept thread waits on a selector with a wake-up pipe, so ``close()`` stops it at once;
 ``close()`` then shuts the reading side of every open connection (a blocked read returns, a
 stream sends its last event), joins their threads and removes the socket file. At most
-``max_clients`` authenticated connections are served; one more is answered ``too_many_clients``
-and closed, as is a peer the policy refuses. TCP connections that have not authenticated yet
-do not count: they have their own MAX_UNAUTHENTICATED slots (and AUTH_TIMEOUT_S each).
+``max_clients`` authenticated connections, and ``max_clients_per_uid`` per UNIX peer uid, are
+served in threads. An authorised UNIX peer over either limit is kept by the accept thread itself
+(no thread, up to ``max_waiting`` of them, each for ``request_timeout_s``) for one request:
+``abort`` or ``status`` is answered (abort in a short-lived thread), anything else
+``too_many_clients``; then it is closed. So no number of idle connections can lock out an
+abort. A peer the policy refuses gets ``unauthorized``. TCP connections that have not
+authenticated yet do not count: they have their own MAX_UNAUTHENTICATED slots (and
+AUTH_TIMEOUT_S each).
 """
 
 from __future__ import annotations
@@ -23,8 +28,16 @@ from pathlib import Path
 from controller.service.config import ServiceConfig
 from controller.service.connection import Connection, RequestHandler
 from controller.service.listeners import bind_tcp, bind_unix, unlink_if_ours
+from controller.service.pacing import RequestPacer
 from controller.service.peer import PeerPolicy, peer_credentials, resolve_gid
-from controller.service.protocol import error_line
+from controller.service.protocol import (
+    Request,
+    RequestError,
+    decode,
+    error_line,
+    ok_line,
+    parse_request,
+)
 
 logger = logging.getLogger(__name__)
 
@@ -32,6 +45,9 @@ JOIN_TIMEOUT_S = 2.0
 # TCP connections still to authenticate are served up to this many at once, apart from
 # max_clients: peers without the token can never take the slots of those who have it.
 MAX_UNAUTHENTICATED = 4
+# What a peer over the connection limits may still send (once), answered by the accept thread.
+OVER_LIMIT_COMMANDS = ("abort", "status")
+WAITING_SEND_TIMEOUT_S = 1.0
 
 
 class ControlServer:
@@ -48,6 +64,10 @@ class ControlServer:
         self._inode: int | None = None
         self._connections: dict[socket.socket, threading.Thread] = {}
         self._pending: set[socket.socket] = set()  # TCP connections not yet authenticated
+        self._uids: dict[socket.socket, int] = {}  # the peer uid of each served UNIX connection
+        # Authorised peers over the limits: (name, buffer, deadline), served by the accept thread.
+        self._waiting: dict[socket.socket, tuple[str, bytearray, float]] = {}
+        self._selector: selectors.BaseSelector | None = None
         self._lock = threading.Lock()
         self._closing = threading.Event()
         self._wake_r, self._wake_w = -1, -1
@@ -138,13 +158,101 @@ class ControlServer:
     # -- accepting ---------------------------------------------------------------------------
     def _accept_loop(self) -> None:
         with selectors.DefaultSelector() as selector:
+            self._selector = selector
             selector.register(self._wake_r, selectors.EVENT_READ)
             for listener in self._listeners:
                 selector.register(listener, selectors.EVENT_READ)
             while not self._closing.is_set():
-                for key, _ in selector.select():
-                    if key.fileobj in self._listeners and not self._closing.is_set():
+                now_s = time.monotonic()
+                timeout_s = min((w[2] - now_s for w in self._waiting.values()), default=None)
+                for key, _ in selector.select(None if timeout_s is None else max(0, timeout_s)):
+                    if self._closing.is_set():
+                        break
+                    if key.fileobj in self._listeners:
                         self._accept(key.fileobj)
+                    elif key.fileobj in self._waiting:
+                        self._read_waiting(key.fileobj)
+                now_s = time.monotonic()
+                for sock in [s for s, w in self._waiting.items() if w[2] <= now_s]:
+                    logger.info("%s: disconnected: no abort or status within %g s",
+                                self._waiting[sock][0], self.config.request_timeout_s)
+                    self._drop_waiting(sock)
+            for sock in list(self._waiting):
+                self._drop_waiting(sock)
+
+    # -- peers over the limits: one abort or status each, answered here -----------------------
+    def _wait(self, sock: socket.socket, name: str) -> bool:
+        """Keep an authorised peer over the limits for one ``abort`` or ``status``."""
+        if len(self._waiting) >= self.config.max_waiting or self._selector is None:
+            return False
+        sock.setblocking(False)
+        self._waiting[sock] = (name, bytearray(),
+                               time.monotonic() + self.config.request_timeout_s)
+        self._selector.register(sock, selectors.EVENT_READ)
+        return True
+
+    def _drop_waiting(self, sock: socket.socket) -> None:
+        self._waiting.pop(sock, None)
+        if self._selector is not None:
+            with contextlib.suppress(KeyError, ValueError):
+                self._selector.unregister(sock)
+        sock.close()
+
+    def _read_waiting(self, sock: socket.socket) -> None:
+        name, buffer, _ = self._waiting[sock]
+        try:
+            chunk = sock.recv(4096)
+        except BlockingIOError:
+            return
+        except OSError:
+            chunk = b""
+        buffer += chunk
+        end = buffer.find(b"\n")
+        if not chunk or (end < 0 and len(buffer) > self.config.max_request_bytes):
+            self._drop_waiting(sock)
+            return
+        if end < 0:
+            return
+        self._waiting.pop(sock)
+        with contextlib.suppress(KeyError, ValueError):
+            self._selector.unregister(sock)
+        line = bytes(buffer[:end])
+        try:
+            request = parse_request(decode(line))
+        except RequestError as exc:
+            self._answer_waiting(sock, error_line(None, exc.code, exc.message))
+            return
+        if request.cmd not in OVER_LIMIT_COMMANDS:
+            self._answer_waiting(sock, error_line(request.id, "too_many_clients", (
+                f"over the connection limits (service.max_clients {self.config.max_clients}, "
+                f"max_clients_per_uid {self.config.max_clients_per_uid}): only "
+                f"{' and '.join(OVER_LIMIT_COMMANDS)} are answered")))
+            return
+        if request.cmd == "status":
+            self._answer_waiting(sock, self._respond(request))
+            return
+        logger.warning("%s: abort over the connection limits", name)
+        threading.Thread(target=lambda: self._answer_waiting(sock, self._respond(request)),
+                         name=f"{name} abort", daemon=True).start()
+
+    def _respond(self, request: Request) -> bytes:
+        try:
+            return ok_line(request.id, self._handler.handle(request))
+        except RequestError as exc:
+            return error_line(request.id, exc.code, exc.message)
+        except Exception as exc:  # a bug must not end the accept thread
+            logger.exception("%s failed", request.cmd)
+            return error_line(request.id, "failed", f"internal error: {type(exc).__name__}")
+
+    def _answer_waiting(self, sock: socket.socket, data: bytes) -> None:
+        """Send the one answer (a short blocking write) and close."""
+        try:
+            sock.settimeout(WAITING_SEND_TIMEOUT_S)
+            sock.sendall(data)
+        except OSError as exc:
+            logger.debug("answer to a peer over the limits not sent: %s", exc)
+        finally:
+            sock.close()
 
     def _accept(self, listener: socket.socket) -> None:
         try:
@@ -153,7 +261,10 @@ class ControlServer:
             logger.warning("accept failed: %s", exc)
             return
         kind = self._listeners[listener]
-        name, refusal = self._admit(sock, kind)
+        name, refusal, uid = self._admit(sock, kind)
+        if refusal is not None and refusal[0] == "too_many_clients" and uid is not None and \
+                self._wait(sock, name):
+            return
         if refusal is not None:
             logger.warning("%s: refused: %s", name, refusal[1])
             with contextlib.suppress(OSError):
@@ -161,19 +272,26 @@ class ControlServer:
             sock.close()
             return
         tcp = kind == "tcp"
-        connection = Connection(sock, name, self._handler, self.config.max_request_bytes,
+        cfg = self.config
+        connection = Connection(sock, name, self._handler, cfg.max_request_bytes,
                                 self._closing, self._token if tcp else None,
-                                self._admit_authenticated if tcp else None)
+                                self._admit_authenticated if tcp else None,
+                                RequestPacer(cfg.request_rate_hz, cfg.request_burst),
+                                cfg.idle_timeout_s, cfg.request_timeout_s)
         thread = threading.Thread(target=self._serve, args=(connection,), name=name,
                                   daemon=True)
         with self._lock:
             self._connections[sock] = thread
+            if uid is not None:
+                self._uids[sock] = uid
             if tcp:
                 self._pending.add(sock)
         thread.start()
 
-    def _admit(self, sock: socket.socket, kind: str) -> tuple[str, tuple[str, str] | None]:
-        """The connection's name for the log, and (code, message) if it is refused."""
+    def _admit(self, sock: socket.socket,
+               kind: str) -> tuple[str, tuple[str, str] | None, int | None]:
+        """The connection's name for the log, (code, message) if it is refused, and the
+        peer's uid once the policy allowed it (UNIX peers)."""
         if kind == "tcp":
             host, port = sock.getpeername()[:2]
             name = f"tcp {host}:{port}"
@@ -181,21 +299,25 @@ class ControlServer:
                 waiting = len(self._pending)
             if waiting >= MAX_UNAUTHENTICATED:
                 return name, ("too_many_clients", f"{waiting} connections are authenticating "
-                                                  "already")
-            return name, None
-        else:
-            try:
-                peer = peer_credentials(sock)
-            except OSError as exc:
-                return "unix peer", ("unauthorized", f"cannot read peer credentials: {exc}")
-            name = f"unix pid {peer.pid} uid {peer.uid}"
-            refusal = self.policy.refusal(peer)
-            if refusal is not None:
-                return name, ("unauthorized", refusal)
+                                                  "already"), None
+            return name, None, None
+        try:
+            peer = peer_credentials(sock)
+        except OSError as exc:
+            return "unix peer", ("unauthorized", f"cannot read peer credentials: {exc}"), None
+        name = f"unix pid {peer.pid} uid {peer.uid}"
+        refusal = self.policy.refusal(peer)
+        if refusal is not None:
+            return name, ("unauthorized", refusal), None
         if self.client_count >= self.config.max_clients:
             return name, ("too_many_clients", f"{self.config.max_clients} clients connected "
-                                              "already")
-        return name, None
+                                              "already"), peer.uid
+        with self._lock:
+            same_uid = sum(1 for uid in self._uids.values() if uid == peer.uid)
+        if same_uid >= self.config.max_clients_per_uid:
+            return name, ("too_many_clients", f"uid {peer.uid} has {same_uid} connections "
+                                              "already (service.max_clients_per_uid)"), peer.uid
+        return name, None, peer.uid
 
     def _serve(self, connection: Connection) -> None:
         logger.debug("%s: connected", connection.name)
@@ -205,5 +327,6 @@ class ControlServer:
             with self._lock:
                 self._connections.pop(connection.sock, None)
                 self._pending.discard(connection.sock)
+                self._uids.pop(connection.sock, None)
             connection.sock.close()
             logger.debug("%s: disconnected", connection.name)

@@ -46,9 +46,10 @@ from controller.service.jobs import (
 from controller.service.listeners import read_token
 from controller.service.model_slot import DEFAULT_SYSTEM, ModelSlot
 from controller.service.peer import PeerPolicy
-from controller.service.protocol import Request, RequestError
+from controller.service.protocol import EncodedResult, Request, RequestError
 from controller.service.sd_notify import Notifier
 from controller.service.server import ControlServer
+from controller.service.snapshot import StatusSnapshot
 from controller.service.states import JOB_STATES, State, StateMachine
 from controller.service.watchdog import WatchdogPinger
 from drivers.core.errors import ConfigError, FineposError
@@ -92,6 +93,7 @@ class Service:
         self._last_job: dict[str, Any] | None = None
         self._last_iteration: dict[str, Any] | None = None
         self._last_reload: dict[str, Any] | None = None
+        self._status = StatusSnapshot(self._build_status, self._status_key)
         self._fault: dict[str, Any] | None = None
         self._backoff = Backoff(config.service.reconnect_initial_s, config.service.reconnect_max_s)
         self._next_reconnect_s = 0.0
@@ -368,8 +370,22 @@ class Service:
             raise RequestError("bad_request", f"{request.cmd} is not a command on this connection")
         return handlers[request.cmd]()
 
-    def status(self) -> dict[str, Any]:
-        """The ``status`` answer: state, job, last pose, last iteration, model, fault, config."""
+    def status(self) -> EncodedResult:
+        """The ``status`` answer (encoded JSON object): state, job, last pose, last iteration,
+        model, fault, config; served from a snapshot (``controller.service.snapshot``)."""
+        return self._status.get()
+
+    def _status_key(self) -> tuple:
+        """The objects the status answer is built from (a new object: rebuild it)."""
+        job = self._job
+        arm = self._cell.arm
+        return (self._machine.snapshot(), job, job is not None and job.done.is_set(),
+                self._last_job, arm.last_pose() if arm is not None else None,
+                self._last_iteration, self._fault, self._reconnected, self._backoff.attempts,
+                self._models.marker(), self._last_reload, self.config, self._log,
+                self._server.client_count if self._server is not None else 0)
+
+    def _build_status(self) -> dict[str, Any]:
         with self._machine.lock:
             state, since, reason = self._machine.snapshot()
             seen = self._cell.arm.last_pose() if self._cell.arm is not None else None

@@ -24,6 +24,7 @@ from __future__ import annotations
 
 import contextlib
 import logging
+import math
 from collections.abc import Iterator
 
 from drivers.core.errors import (
@@ -55,6 +56,8 @@ class ValArm(Arm):
         self.link = ValLink(config)
         # VAL reports no finger width: the nominal width of the last gripper command.
         self._gripper_closed = False
+        self._halts = 0  # counts halt() calls: a segmented move stops when it changes
+        self._last_read: Pose | None = None  # the last ``where`` pose (a move's start)
 
     # -- lifecycle -------------------------------------------------------------------------
     def _open(self) -> None:
@@ -146,18 +149,31 @@ class ValArm(Arm):
 
     # -- Arm backend -------------------------------------------------------------------------
     def _read_pose(self) -> Pose:
-        return self._where().pose
+        self._last_read = self._where().pose
+        return self._last_read
 
     def _move_to(self, target: Pose) -> Pose:
-        line = self.config.commands.move.format(**target.as_dict())
-        self._command_without_output(line, self.config.move_timeout_s)
+        halts = self._halts
+        start, self._last_read = self._last_read, None  # (read just before by move_to/tool)
+        segments = self._segments(start if start is not None else self._read_pose(), target)
+        for i, segment in enumerate(segments):
+            if self._halts != halts:
+                raise MotionRejectedError(f"halted after {i} of {len(segments)} move segments")
+            line = self.config.commands.move.format(**segment.as_dict())
+            self._command_without_output(line, self.config.move_timeout_s)
         # The prompt comes when the move is done (confirmed): reading back is optional.
         return self._where().pose if self.config.where_after_move else target
+
+    def _segments(self, start: Pose, target: Pose) -> list[Pose]:
+        """``target`` reached in equal steps of at most max_segment_mm / max_segment_deg (the
+        angles along their shortest way); the last one is ``target`` itself."""
+        return split_move(start, target, self.config.max_segment_mm, self.config.max_segment_deg)
 
     def _set_speed(self, percent: float) -> None:
         self._command_without_output(self.config.commands.speed.format(percent=percent))
 
     def _halt(self) -> None:
+        self._halts += 1  # a segmented move sends no further segment
         # A move blocks its exchange until the prompt returns (or move_timeout_s on a dead
         # link): cut that wait short so the halt goes out now.
         self.link.interrupt()
@@ -172,3 +188,20 @@ class ValArm(Arm):
     def _finger_width_mm(self) -> float:
         cfg = self.config
         return cfg.gripper_closed_width_mm if self._gripper_closed else cfg.gripper_open_width_mm
+
+
+def split_move(start: Pose, target: Pose, max_mm: float, max_deg: float) -> list[Pose]:
+    """The poses of a move from ``start`` to ``target`` split into equal segments of at most
+    ``max_mm`` (translation) and ``max_deg`` (each of O, A, T, along the shortest way); the
+    last pose is ``target``. 0 for both: one segment."""
+    if max_mm <= 0 or max_deg <= 0:
+        return [target]
+    a, b = start.as_dict(), target.as_dict()
+    delta = {k: b[k] - a[k] for k in a}
+    for k in ("o_deg", "a_deg", "t_deg"):
+        delta[k] = (delta[k] + 180.0) % 360.0 - 180.0
+    distance_mm = math.dist((0.0, 0.0, 0.0), (delta["x_mm"], delta["y_mm"], delta["z_mm"]))
+    turn_deg = max(abs(delta[k]) for k in ("o_deg", "a_deg", "t_deg"))
+    count = max(1, math.ceil(distance_mm / max_mm - 1e-9), math.ceil(turn_deg / max_deg - 1e-9))
+    return [Pose(**{k: a[k] + delta[k] * i / count for k in a}) for i in range(1, count)] + \
+        [target]

@@ -63,12 +63,23 @@ class ValConfig:
     echo: the monitor echoes each command line; a reply must start with that echo.
     exchange_timeout_s: longest wait for the reply to one command.
     move_timeout_s: longest wait for a motion to finish (the prompt after ``do move``).
+    where_after_move: read the pose back with ``where`` after every move and report that
+        (costs 262 bytes, 273 ms at 9600 baud); off (default): a move's prompt means it is done
+        (confirmed), so the target is reported and the next relative move still starts from a
+        fresh ``where``.
     boot_answers: start-up questions (matched case-insensitively as a part of the question
         line) and the answer sent to each; any other question during start-up is an error.
     rejection_errors: controller error texts (part of the ``*...*`` message, any case) that mean
         "refused, nothing moved" (MotionRejectedError); every other error is a fault.
     gripper_open_width_mm / gripper_closed_width_mm: nominal finger widths reported after
         open/close (VAL has no finger feedback).
+    max_segment_mm / max_segment_deg: a move longer than this (translation, or any of O, A, T)
+        is sent as equal ``do move`` segments, each waited for (moves block: confirmed), so a
+        halt stops the arm at the end of the segment under way by simply not sending the next
+        one (whether VAL's ``abort`` stops a running ``do move`` has no source). 0 for both
+        (the default, so timing fits see whole moves): never split; deploy/finepos.yaml sets
+        20 mm / 10 deg (a judgement: a few hundred ms per segment). A target the controller
+        refuses may then be refused after the first segments have moved.
     commands: the command templates.
     """
 
@@ -81,6 +92,7 @@ class ValConfig:
     echo: bool = True
     exchange_timeout_s: float = field(default=2.0, metadata={"min": 0.0, "exclusive_min": True})
     move_timeout_s: float = field(default=60.0, metadata={"min": 0.0, "exclusive_min": True})
+    where_after_move: bool = False
     boot_answers: dict[str, str] = field(default_factory=lambda: {
         "Load VAL from floppy": "n",
         "Initialize": "n",
@@ -88,6 +100,8 @@ class ValConfig:
     rejection_errors: tuple[str, ...] = ("position out of range",)
     gripper_open_width_mm: float = field(default=40.0, metadata={"min": 0.0})
     gripper_closed_width_mm: float = field(default=0.0, metadata={"min": 0.0})
+    max_segment_mm: float = field(default=0.0, metadata={"min": 0.0})
+    max_segment_deg: float = field(default=0.0, metadata={"min": 0.0})
     commands: ValCommands = field(default_factory=ValCommands)
 
     def __post_init__(self) -> None:
@@ -99,5 +113,8 @@ class ValConfig:
         for question, answer in self.boot_answers.items():
             if not question.strip() or not answer.isascii() or any(c in answer for c in "\r\n"):
                 raise ValueError(f"boot_answers: bad entry {question!r}: {answer!r}")
+        if (self.max_segment_mm == 0) != (self.max_segment_deg == 0):
+            raise ValueError("max_segment_mm and max_segment_deg: both 0 (never split) or both "
+                             f"above 0, got {self.max_segment_mm} / {self.max_segment_deg}")
         if any(not text.strip() for text in self.rejection_errors):
             raise ValueError("rejection_errors: entries must not be empty")

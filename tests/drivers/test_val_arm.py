@@ -18,6 +18,7 @@ from drivers.core.pose import Pose, ToolStep
 from drivers.interfaces import Lifecycle
 from drivers.safety import SafetyLimits
 from drivers.val import ValArm, ValConfig
+from drivers.val.arm import split_move
 from sim_backend.emulators.val.server import DEFAULT_GARBAGE, ValEmulator, ValFaults
 from tests.mocks.fakes import FakeArm
 
@@ -247,3 +248,58 @@ def test_halt_interrupts_a_move_waiting_on_a_silent_link(emulator, backing):
         assert "halted while waiting" in str(errors[0])
         assert arm.state is Lifecycle.FAULT  # from the halt's own timeout
         arm.disconnect()  # closing never raises, also with the link down
+
+
+def test_split_move_takes_equal_steps_along_the_shortest_angles():
+    start = Pose(300.0, 0.0, 200.0, 170.0, 90.0, 0.0)
+    target = Pose(300.0, 50.0, 200.0, -170.0, 90.0, 0.0)  # 50 mm; O turns 20 deg through 180
+    segments = split_move(start, target, max_mm=20.0, max_deg=10.0)
+    assert len(segments) == 3 and segments[-1] is target
+    assert segments[0].y_mm == pytest.approx(50 / 3) and segments[0].o_deg == pytest.approx(
+        170 + 20 / 3)
+    assert split_move(start, target, 0.0, 0.0) == [target]
+    assert split_move(start, start, 20.0, 10.0) == [start]
+    assert len(split_move(start, target, 100.0, 5.0)) == 4  # the angle decides
+
+
+def test_a_long_move_goes_out_in_segments(emulator, backing):
+    with make_arm(emulator.url, max_segment_mm=1.0, max_segment_deg=1.0) as arm:
+        arm.move_tool(STEP)  # 2.3 mm and 3 deg: three segments
+        assert len(backing.moves) == 3
+        assert backing.moves[-1] == arm.pose()
+
+
+def test_segment_config_is_checked():
+    from drivers.core.errors import ConfigError
+    from drivers.core.typed_config import from_mapping
+    with pytest.raises(ConfigError, match="arm.max_segment_mm"):
+        from_mapping(ValConfig, {"port": "loop://", "max_segment_mm": -1.0}, "arm")
+    with pytest.raises(ConfigError, match="max_segment_mm and max_segment_deg"):
+        from_mapping(ValConfig, {"port": "loop://", "max_segment_mm": 5.0}, "arm")
+
+
+def test_a_halt_during_a_segmented_move_sends_no_further_segment():
+    """Abort during a VAL move: the segment under way ends, the next one is never sent."""
+    import threading
+    import time
+
+    class HaltingArm(FakeArm):
+        driver: ValArm | None = None
+
+        def _move_to(self, target: Pose) -> Pose:
+            reached = super()._move_to(target)
+            if len(self.moves) == 1:  # an operator's abort arrives during the first segment
+                threading.Thread(target=self.driver.halt, daemon=True).start()
+                time.sleep(0.2)  # (the halt counts itself at once; its command waits its turn)
+            return reached
+
+    with HaltingArm() as backing, ValEmulator(backing) as emu, \
+            make_arm(emu.url, max_segment_mm=1.0, max_segment_deg=1.0) as arm:
+        backing.driver = arm
+        with pytest.raises(MotionRejectedError, match="halted"):
+            arm.move_tool(STEP)
+        assert len(backing.moves) == 1
+        deadline = time.monotonic() + 5.0
+        while backing.halts == 0 and time.monotonic() < deadline:
+            time.sleep(0.01)
+        assert backing.halts == 1 and arm.state is Lifecycle.ACTIVE

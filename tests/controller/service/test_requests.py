@@ -11,7 +11,7 @@ import threading
 
 import pytest
 
-from controller.service.client import ServiceClient, ServiceError
+from controller.service.client import ServiceClient, ServiceError, ServiceUnavailable
 from controller.service.commands import COMMANDS
 from controller.service.listeners import read_token
 from drivers.core.errors import ConfigError
@@ -36,7 +36,9 @@ def fakes():
 @pytest.fixture
 def service(tmp_path, short_dir, fakes):
     config = service_config(tmp_path, short_dir,
-                            service={"max_request_bytes": MAX_REQUEST_BYTES, "max_clients": 12})
+                            service={"max_request_bytes": MAX_REQUEST_BYTES, "max_clients": 12,
+                                     "max_clients_per_uid": 12,  # all clients here are ours
+                                     "request_rate_hz": 0})  # unpaced: 10,000 requests below
     with running_service(config, device_opener(*fakes)) as running:
         yield running
 
@@ -152,14 +154,21 @@ def test_concurrent_clients_are_all_served(service):
     assert not failures and served == [100] * 8
 
 
-def test_clients_beyond_the_limit_are_refused(tmp_path, short_dir, fakes):
+def test_clients_beyond_the_limit_get_only_abort_and_status_once(tmp_path, short_dir, fakes):
     config = service_config(tmp_path, short_dir, service={"max_clients": 2})
     with running_service(config, device_opener(*fakes)) as service, \
             client_for(service) as first, client_for(service) as second:
         assert first.call("status") and second.call("status")
         with client_for(service) as third, pytest.raises(ServiceError) as refused:
-            third.call("status")
+            third.call("teach", auto=False)
         assert refused.value.code == "too_many_clients"
+        assert "only abort and status" in refused.value.message
+        with client_for(service) as fourth:
+            assert fourth.call("status")["state"] == "idle"
+            with pytest.raises(ServiceUnavailable):  # one request, then closed
+                fourth.call("status")
+        with client_for(service) as fifth:
+            assert fifth.call("abort")["halted"] is True
 
 
 @pytest.fixture
