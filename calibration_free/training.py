@@ -251,9 +251,12 @@ def check_part(object_kind: str, kappa: int, nominal_pose: Pose | Mapping[str, f
 
 
 def _summary(result: TrainedMLP) -> dict:
+    """What the model file's header keeps of one network's training: a summary (layers,
+    seconds, epochs, first and final loss), not the per-epoch loss curve (thousands of numbers
+    that made the header unreadable)."""
     return {"layers": list(result.model.layer_sizes), "seconds": result.seconds,
-            "epochs": len(result.loss_curve), "final_loss": result.loss_curve[-1],
-            "loss_curve": result.loss_curve}
+            "epochs": len(result.loss_curve), "first_loss": result.loss_curve[0],
+            "final_loss": result.loss_curve[-1]}
 
 
 def train_nn2(rois: np.ndarray | list[np.ndarray], dphi_deg: np.ndarray, kappa: int,

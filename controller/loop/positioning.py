@@ -17,20 +17,31 @@ import uuid
 from collections.abc import Callable
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Literal
+from typing import Any, Literal, Protocol
 
 import cv2
 
 from controller.loop.iteration_log import IterationLog
 from controller.loop.record import IterationRecord, LoopKind
-from controller.systems.estimator import Estimator, corrective_step
+from controller.systems.estimator import Estimator, TranslationEstimate, corrective_step
 from drivers.core.errors import MotionRejectedError
-from drivers.interfaces import Arm, Camera
+from drivers.interfaces import Arm, Camera, Frame
 
 logger = logging.getLogger(__name__)
 
 GroundTruth = Callable[[], tuple[float, float, float]]
 Outcome = Literal["converged", "budget", "no_object", "ambiguous", "rejected"]
+
+
+class LookRecorder(Protocol):
+    """Sees every look as it is logged (``controller.recording.RunRecorder`` is one)."""
+
+    def look(self, record: IterationRecord, frame: Frame, estimate: TranslationEstimate,
+             estimator: Any = None,
+             error_at_look: tuple[float, float, float] | None = None) -> None:
+        """One look: its complete record, the frame, the translation estimate (whose percept
+        holds the localisation), the estimator and the true error when the frame was taken."""
+        ...
 
 
 @dataclass(frozen=True)
@@ -83,14 +94,17 @@ class PositioningLoop:
 
     def __init__(self, arm: Arm, camera: Camera, config: LoopConfig,
                  log: IterationLog | None = None, ground_truth: GroundTruth | None = None,
-                 image_dir: str | Path | None = None) -> None:
+                 image_dir: str | Path | None = None,
+                 recorder: LookRecorder | None = None) -> None:
         self.arm = arm
         self.camera = camera
         self.config = config
         self.log = log
         self.ground_truth = ground_truth
         self.image_dir = Path(image_dir) if image_dir else (log.path.parent if log else None)
+        self.recorder = recorder
         self._abort = False
+        self._look: tuple[Frame, TranslationEstimate, Estimator, tuple | None] | None = None
 
     def abort(self) -> None:
         """Ask a running loop to stop before its next move (thread-safe flag)."""
@@ -134,6 +148,7 @@ class PositioningLoop:
             frame = self.camera.grab()
             t1 = time.perf_counter()
             tr = estimator.estimate_translation(frame.image)
+            self._look = (frame, tr, estimator, states[-1].error)
             record = IterationRecord(time.time(), run_id, estimator.name, iteration + 1,
                                      tr.u_px, tr.v_px, tr.status, dict(tr.record),
                                      loops=loops, error=states[-1].error)
@@ -180,17 +195,22 @@ class PositioningLoop:
     def _write(self, record: IterationRecord, kind: LoopKind, clock: tuple[float, ...],
                image) -> None:
         """Log one look: ``clock`` is (start, grabbed, perceived[, moved]) from perf_counter;
-        without a move the move took no time."""
-        if self.log is None:
+        without a move the move took no time. The ``recorder`` (if any) sees the record after
+        the log has it."""
+        if self.log is None and self.recorder is None:
             return
         t0, t1, t2 = clock[:3]
         t3 = clock[3] if len(clock) > 3 else t2
         record.loop_kind = kind
         record.timings_ms = {"grab": (t1 - t0) * 1e3, "perceive": (t2 - t1) * 1e3,
                              "move": (t3 - t2) * 1e3}
-        if self.config.save_images and self.image_dir is not None:
+        if self.log is not None and self.config.save_images and self.image_dir is not None:
             name = f"{record.run_id}-{record.iteration:03d}-{kind}.png"
             self.image_dir.mkdir(parents=True, exist_ok=True)
             cv2.imwrite(str(self.image_dir / name), cv2.cvtColor(image, cv2.COLOR_RGB2BGR))
             record.image = name
-        self.log.write(record.as_dict())
+        if self.log is not None:
+            self.log.write(record.as_dict())
+        if self.recorder is not None and self._look is not None:
+            frame, estimate, estimator, error_at_look = self._look
+            self.recorder.look(record, frame, estimate, estimator, error_at_look)

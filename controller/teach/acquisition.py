@@ -56,8 +56,9 @@ def acquire(arm: Arm, camera: Camera, nominal: Pose, offsets: np.ndarray, *,
     max_deg = limits.max_step_deg if limits else 1e9
     images, labels, truth = [], [], []
     t0 = time.perf_counter()
-    for dx, dy, dphi in tqdm(offsets, desc=f"acquire {name}", unit="img", disable=not progress,
-                             leave=False):
+    # disable=None: tqdm draws only when stderr is a terminal (no \r spam in logs)
+    for dx, dy, dphi in tqdm(offsets, desc=f"acquire {name}", unit="img",
+                             disable=None if progress else True, leave=False):
         target = nominal.moved_in_tool_frame(ToolStep(-dx, -dy, 0.0, -dphi))
         transfer(arm, target, max_mm, max_deg)
         reached = arm.pose()

@@ -1,8 +1,9 @@
-"""PyBullet, imported with its start-up banner sent to stderr.
+"""PyBullet, imported without its start-up banner.
 
-PyBullet's C extension prints "pybullet build time: ..." to file descriptor 1 when first
-imported; finepos commands print JSON on stdout, so the banner must not land there. Every
-module imports PyBullet as ``from sim_backend.cell.pybullet_quiet import p``.
+PyBullet's C extension writes "pybullet build time: ..." straight to a file descriptor when
+first imported; finepos commands print JSON on stdout and one-line errors on stderr, so the
+banner must land on neither. Every module imports PyBullet as
+``from sim_backend.cell.pybullet_quiet import p``.
 """
 
 from __future__ import annotations
@@ -13,13 +14,18 @@ import sys
 
 def _import_quietly():
     sys.stdout.flush()
-    saved = os.dup(1)
+    sys.stderr.flush()
+    saved = [os.dup(1), os.dup(2)]
+    devnull = os.open(os.devnull, os.O_WRONLY)
     try:
-        os.dup2(2, 1)
+        os.dup2(devnull, 1)
+        os.dup2(devnull, 2)
         import pybullet
     finally:
-        os.dup2(saved, 1)
-        os.close(saved)
+        for fd, copy in zip((1, 2), saved, strict=True):
+            os.dup2(copy, fd)
+            os.close(copy)
+        os.close(devnull)
     return pybullet
 
 

@@ -43,7 +43,8 @@ class _Progress:
     def __init__(self, weights: Sequence[int], desc: str, unit: str, enabled: bool) -> None:
         self.weights = list(weights)
         self.done = [0] * len(self.weights)
-        self.bar = tqdm(total=sum(self.weights), desc=desc, unit=unit, disable=not enabled)
+        self.bar = tqdm(total=sum(self.weights), desc=desc, unit=unit,
+                        disable=None if enabled else True)
 
     def tick(self, index: int, n: int = 1) -> None:
         """Advance task ``index`` by ``n`` units, never beyond its weight."""
