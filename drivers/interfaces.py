@@ -20,6 +20,7 @@ import numpy as np
 
 from drivers.core.errors import DeviceFaultError, DeviceNotConnectedError, MotionRejectedError
 from drivers.core.pose import Pose, ToolStep
+from drivers.core.timing import VAL_SPEED_MAX, VAL_SPEED_MIN
 from drivers.safety import SafetyLimits, check_target, check_tool_step
 
 logger = logging.getLogger(__name__)
@@ -177,10 +178,11 @@ class Arm(Device):
         return Motion(step, sent, reached, clipped)
 
     def set_speed(self, percent: float) -> None:
-        """Monitor speed in percent, 0 < percent <= 100."""
+        """Monitor speed in percent: VAL's range, 0.01..327.67, 100 normal."""
         self._require_connected()
-        if not (isinstance(percent, (int, float)) and 0 < percent <= 100):
-            raise MotionRejectedError(f"speed must be in (0, 100] percent, got {percent!r}")
+        if not (isinstance(percent, (int, float)) and VAL_SPEED_MIN <= percent <= VAL_SPEED_MAX):
+            raise MotionRejectedError(f"speed must be in {VAL_SPEED_MIN:g}..{VAL_SPEED_MAX:g} "
+                                      f"percent, got {percent!r}")
         self._set_speed(float(percent))
 
     def halt(self) -> None:

@@ -35,7 +35,9 @@ def open_hil_devices(config, seed: int = 0, activate: bool = True,
     """Serve a new simulated cell over its emulators and open the real drivers on them.
 
     Yields CellDevices whose arm, camera and wrench are the real drivers and whose ``cell`` is
-    the served cell (serialised). Everything is closed on exit: drivers, emulators, cell.
+    the served cell (serialised). With ``scene.timing: realistic`` the emulators take the
+    ``timing`` section's durations for real (paced lines, moves that last), and the devices'
+    clock is wall time. Everything is closed on exit: drivers, emulators, cell.
     """
     from sim_backend.cell.sim_cell import SimCell  # PyBullet only when a cell is built
 
@@ -43,7 +45,8 @@ def open_hil_devices(config, seed: int = 0, activate: bool = True,
     with contextlib.ExitStack() as stack:
         cell = stack.enter_context(SimCell(config.scene, arm_options, seed=seed))
         emulators = stack.enter_context(
-            CellEmulators(cell, ati=True, mjpeg_port=0, fps=fps))
+            CellEmulators(cell, ati=True, mjpeg_port=0, fps=fps,
+                          timing=config.timing if config.scene.timing == "realistic" else None))
         hil_config = hil_device_config(config, emulators)
         devices = stack.enter_context(open_devices(hil_config, seed=seed, activate=activate))
         yield dataclasses.replace(devices, cell=emulators.cell)

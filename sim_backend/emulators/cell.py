@@ -22,7 +22,9 @@ import logging
 import threading
 from typing import Any, Self
 
+from drivers.core.timing import TimingConfig
 from sim_backend.cell.sim_cell import SimCell
+from sim_backend.cell.timing import CellTiming, cell_timing
 from sim_backend.devices import SimArm, SimCamera, SimWrenchSensor
 from sim_backend.emulators.ati.emulator import AtiEmulator
 from sim_backend.emulators.lifecycle import Lifecycle
@@ -71,14 +73,24 @@ class CellEmulators(Lifecycle):
         boot_questions / faults: the VAL emulator's start-up questions and fault knobs.
         counts_per_force / counts_per_torque: the emulated ATI controller's calibration (the
             driver's config must use the same).
+        timing: realistic timing (``--timing realistic``): the VAL and ATI lines are paced at
+            ``val_baud`` / ``ati_baud``, a move really takes its motion time (``do move``
+            answers after it), the hand its hand time, the camera streams at
+            ``camera.frame_rate_hz`` with exposure, latency and motion blur (fps is then
+            ignored). None: ideal, everything as fast as it goes.
     """
 
     def __init__(self, cell: SimCell, *, val_tcp_port: int | None = None, ati: bool = False,
                  ati_tcp_port: int | None = None, mjpeg_port: int | None = None,
                  fps: float = DEFAULT_FPS, boot_questions: bool = False,
                  faults: ValFaults | None = None, counts_per_force: float = 20.0,
-                 counts_per_torque: float = 333.33) -> None:
+                 counts_per_torque: float = 333.33, timing: TimingConfig | None = None) -> None:
         self.cell = SerialisedCell(cell)
+        self.timing_config = timing
+        self.timing: CellTiming | None = (None if timing is None
+                                          else cell_timing("realistic", timing, wall=True))
+        if timing is not None:
+            fps = timing.camera.frame_rate_hz
         self._val_tcp_port = val_tcp_port
         self._ati = ati or ati_tcp_port is not None
         self._ati_tcp_port = ati_tcp_port
@@ -113,12 +125,10 @@ class CellEmulators(Lifecycle):
         """Config sections (``arm``, and ``wrench`` and ``camera`` where served) that point the
         real drivers at these emulators.
 
-        VAL reports no finger width, so the VAL driver's nominal closed width is set to the
-        simulated part's: the grasp's grip check then passes when the jaws close on the part.
+        The VAL driver keeps its own gripper defaults, as on a real controller (VAL reports no
+        finger width): the grasp's check must rest on the wrist sensor, as on the real cell.
         """
-        sections: dict[str, dict] = {"arm": {
-            "type": "val", "port": self.val_url,
-            "gripper_closed_width_mm": self.cell.part.grasp_width_mm}}
+        sections: dict[str, dict] = {"arm": {"type": "val", "port": self.val_url}}
         if self.ati_url is not None:
             sections["wrench"] = {"type": "ati", "port": self.ati_url}
         if self.stream_url is not None:
@@ -129,16 +139,22 @@ class CellEmulators(Lifecycle):
         """Connect the simulated devices and start every emulator asked for."""
         stack = self._stack
         try:
-            arm = stack.enter_context(SimArm(self.cell, None))
+            timing, config = self.timing, self.timing_config
+            if timing is not None:
+                stack.callback(timing.clock.interrupt)  # first out: no sleep holds a close
+            arm = stack.enter_context(SimArm(self.cell, None, timing))
             self.val = stack.enter_context(ValEmulator(
                 arm, tcp_port=self._val_tcp_port, boot_questions=self._boot_questions,
-                kinematics=SIM_KINEMATICS, faults=self._faults))
+                kinematics=SIM_KINEMATICS, faults=self._faults,
+                baud=config.val_baud if config else None,
+                on_line=timing.begin_command if timing else None))
             if self._ati:
-                sensor = stack.enter_context(SimWrenchSensor(self.cell))
-                self.ati = stack.enter_context(AtiEmulator(sensor, *self._counts,
-                                                           tcp_port=self._ati_tcp_port))
+                sensor = stack.enter_context(SimWrenchSensor(self.cell, timing))
+                self.ati = stack.enter_context(AtiEmulator(
+                    sensor, *self._counts, tcp_port=self._ati_tcp_port,
+                    baud=config.ati_baud if config else None))
             if self._mjpeg_port is not None:
-                camera = stack.enter_context(SimCamera(self.cell))
+                camera = stack.enter_context(SimCamera(self.cell, timing))
                 self.mjpeg = stack.enter_context(MjpegServer(camera, port=self._mjpeg_port,
                                                              fps=self._fps))
         except BaseException:

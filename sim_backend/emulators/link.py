@@ -6,6 +6,11 @@ slave the emulator keeps open, or a TCP port on 127.0.0.1) for one serving threa
 waits on a selector with a timeout that other threads can cut short (``wake``: new work for the
 serving thread) or end for good (``interrupt``: stop serving), so an emulator reacts at once
 and stops deterministically. ``LinkServer`` (a ``ThreadedServer``) owns the link and that thread.
+
+With a ``baud`` rate (``--timing realistic``) the link takes the wire time of a real serial
+line in both directions (``bits_per_byte`` bits a byte, 10 for 8N1): bytes the client sent are
+handed to the emulator only after their time on the line, and replies leave in small chunks,
+each after its own time, so a client sees them arrive at the line's pace.
 """
 
 from __future__ import annotations
@@ -14,6 +19,8 @@ import functools
 import logging
 import os
 import selectors
+import threading
+import time
 from abc import abstractmethod
 from collections.abc import Callable
 
@@ -23,12 +30,26 @@ from sim_backend.emulators.lifecycle import ThreadedServer
 logger = logging.getLogger(__name__)
 
 _WAKE_CHUNK_BYTES = 64
+# A paced reply leaves in chunks of about this long on the wire (s).
+_PACE_CHUNK_S = 0.01
 
 
 class EmulatorLink:
-    """A pty (default) or TCP endpoint plus a wake-up pipe. ``close()`` is idempotent."""
+    """A pty (default) or TCP endpoint plus a wake-up pipe. ``close()`` is idempotent.
 
-    def __init__(self, endpoint: PtyEndpoint | TcpEndpoint | None = None) -> None:
+    baud: pace the bytes at this rate both ways (None: as fast as the endpoint goes);
+    bits_per_byte: bits on the line per byte (8N1: 10). wire_s: seconds spent pacing so far.
+    """
+
+    def __init__(self, endpoint: PtyEndpoint | TcpEndpoint | None = None,
+                 baud: float | None = None, bits_per_byte: int = 10) -> None:
+        if baud is not None and baud <= 0:
+            raise ValueError(f"baud must be > 0, got {baud}")
+        self.baud = baud
+        self.bits_per_byte = bits_per_byte
+        self.wire_s = 0.0
+        self._line_free_at = 0.0  # monotonic time the last paced byte leaves
+        self._stop = threading.Event()
         self.endpoint = endpoint or PtyEndpoint()
         self.url = self.endpoint.url
         self._wake_r, self._wake_w = os.pipe()
@@ -51,11 +72,36 @@ class EmulatorLink:
                 os.read(self._wake_r, _WAKE_CHUNK_BYTES)
             else:
                 data += key.data()
+        if data:
+            self._pace(len(data))
         return None if self._interrupted else data
 
+    def _pace(self, n_bytes: int) -> None:
+        """Take the wire time of ``n_bytes`` (when paced; cut short by ``interrupt``)."""
+        if self.baud is None or n_bytes <= 0:
+            return
+        seconds = n_bytes * self.bits_per_byte / self.baud
+        self.wire_s += seconds
+        self._stop.wait(seconds)
+
     def write(self, data: bytes) -> None:
-        """Send to the client (dropped after a while if nobody reads, as on a real line)."""
-        self.endpoint.write(data)
+        """Send to the client (dropped after a while if nobody reads, as on a real line);
+        paced at ``baud`` when set."""
+        if self.baud is None:
+            self.endpoint.write(data)
+            return
+        chunk = max(1, int(self.baud * _PACE_CHUNK_S / self.bits_per_byte))
+        free_at = max(time.monotonic(), self._line_free_at)
+        for i in range(0, len(data), chunk):
+            piece = data[i:i + chunk]
+            seconds = len(piece) * self.bits_per_byte / self.baud
+            self.wire_s += seconds
+            free_at += seconds  # deadlines: the work of writing does not slow the line
+            self._stop.wait(max(0.0, free_at - time.monotonic()))
+            if self._stop.is_set():
+                return
+            self.endpoint.write(piece)
+        self._line_free_at = free_at
 
     def hang_up(self) -> None:
         """A pulled cable: a pty goes quiet, a TCP client is disconnected."""
@@ -68,6 +114,7 @@ class EmulatorLink:
     def interrupt(self) -> None:
         """Make a pending and every later ``read`` return None (thread-safe)."""
         self._interrupted = True
+        self._stop.set()
         os.write(self._wake_w, b"x")
 
     def close(self) -> None:
@@ -91,12 +138,16 @@ class LinkServer(ThreadedServer):
 
     ``start()`` opens the line (a pty, or a TCP port on 127.0.0.1 when ``tcp_port`` is given)
     and runs ``_serve`` on a thread until ``close()``, which interrupts any pending read or
-    ``_closing`` wait, joins the thread and closes the line.
+    ``_closing`` wait, joins the thread and closes the line. ``baud``: pace the line (see
+    ``EmulatorLink``).
     """
 
-    def __init__(self, tcp_port: int | None = None) -> None:
+    def __init__(self, tcp_port: int | None = None, baud: float | None = None,
+                 bits_per_byte: int = 10) -> None:
         super().__init__()
         self._tcp_port = tcp_port
+        self._baud = baud
+        self._bits_per_byte = bits_per_byte
         self._link: EmulatorLink | None = None
 
     @property
@@ -108,8 +159,9 @@ class LinkServer(ThreadedServer):
 
     def _open(self) -> dict[str, Callable[[], object]]:
         endpoint = PtyEndpoint() if self._tcp_port is None else TcpEndpoint(self._tcp_port)
-        self._link = EmulatorLink(endpoint)
-        logger.info("%s on %s", type(self).__name__, self._link.url)
+        self._link = EmulatorLink(endpoint, self._baud, self._bits_per_byte)
+        logger.info("%s on %s%s", type(self).__name__, self._link.url,
+                    f" at {self._baud:g} baud" if self._baud else "")
         return {"serve": functools.partial(self._serve, self._link)}
 
     def _interrupt(self) -> None:

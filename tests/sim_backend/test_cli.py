@@ -52,6 +52,11 @@ def test_bench_measures_the_three_medians(tmp_path):
     results = bench.measure(SceneConfig(), repeats=10)
     for key in ("render_ms", "move_ms", "look_and_move_ms"):
         assert results[key]["median"] > 0 and results[key]["p90"] >= results[key]["median"]
+    realistic = results["realistic_look_and_move"]  # cell seconds next to wall time
+    assert realistic["cell_ms"] > 0.0 and realistic["wall_ms"] > 0.0
+    assert realistic["wire_ms"] > 272.0 and realistic["motion_ms"] > 0.0
+    assert realistic["cell_ms"] == pytest.approx(
+        realistic["wire_ms"] + realistic["motion_ms"] + realistic["camera_ms"], rel=0.05)
     out = tmp_path / "bench.json"
     assert main(["bench", "sim", "--repeats", "10", "--json", str(out)]) == 0
     written = json.loads(out.read_text())

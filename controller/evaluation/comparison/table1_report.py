@@ -100,6 +100,28 @@ def _failures(result: Table1Result) -> list[str]:
     return lines
 
 
+def _times(result: Table1Result) -> list[str]:
+    def seconds(entry) -> str:
+        if not entry:
+            return "n/a"
+        return " / ".join("never" if entry[k] is None else f"{entry[k]:.2f}"
+                          for k in ("median", "p95"))
+
+    def interval(ci) -> str:
+        if not ci:
+            return "n/a"
+        return f"{ci['rate'] * 100:.1f}% ({ci['low'] * 100:.1f}-{ci['high'] * 100:.1f}%)"
+
+    lines = ["| system | light | time to safe [s] | time to grasp [s] | safe after 1.5 loops "
+             "| grasp success |", "|---|---|---|---|---|---|"]
+    for r in result.reports:
+        lines.append(f"| {r['system']} | {r['lighting']} | {seconds(r.get('time_to_safe_s'))} | "
+                     f"{seconds(r.get('time_to_grasp_s'))} | "
+                     f"{interval(r.get('safe_rate_ci', {}).get('1.5'))} | "
+                     f"{interval(r.get('grasp_success_ci'))} |")
+    return lines
+
+
 def _cost(result: Table1Result) -> list[str]:
     lines = ["| system | rotation features | training images | acquisition [s] | training [s] "
              "| per loop, good / poor light [ms] |",
@@ -233,6 +255,14 @@ def table1_markdown(result: Table1Result, source: str) -> str:
         "is not safe). Grasp success: the simulated guarded grasp held the part.",
         "",
         *_failures(result),
+        "",
+        "## Time and intervals",
+        "",
+        f"Cell seconds ({first.get('timing') or 'unknown'} timing) from the start of "
+        "positioning to the first safe pose and to the part held after the lift (median / "
+        "p95), and the rates with their 95% Wilson intervals.",
+        "",
+        *_times(result),
         "",
         "## Cost",
         "",

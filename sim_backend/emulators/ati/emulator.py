@@ -43,13 +43,14 @@ class AtiFaults:
 
 
 class AtiEmulator(LinkServer):
-    """Serves one emulated ATI F/T controller; use as a context manager."""
+    """Serves one emulated ATI F/T controller; use as a context manager. ``baud``: pace the
+    line at this rate (``--timing realistic``: ``timing.ati_baud``; None: unpaced)."""
 
     def __init__(self, sensor: WrenchSensor, counts_per_force: float = 20.0,
                  counts_per_torque: float = 333.33, echo: bool = True,
                  stream_period_s: float = 0.05, faults: AtiFaults | None = None,
-                 tcp_port: int | None = None) -> None:
-        super().__init__(tcp_port)
+                 tcp_port: int | None = None, baud: float | None = None) -> None:
+        super().__init__(tcp_port, baud)
         self.faults = faults or AtiFaults()
         self.controller = AtiController(sensor, counts_per_force, counts_per_torque, echo,
                                         status_word=lambda: self.faults.status_word)

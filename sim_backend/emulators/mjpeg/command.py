@@ -7,7 +7,9 @@ Example: finepos sim camera-stream --config deploy/finepos.yaml --port 8080
   the ``scene:`` section of --config (defaults without it); in this process nothing moves the
   arm, so for a hardware-in-the-loop run serve MjpegServer from the process that runs the VAL
   emulator on the same cell. ``--source 0`` relays a real camera (device index, file or URL)
-  instead. Ctrl-C or SIGTERM stops it.
+  instead. With --timing realistic (the default) frames come at timing.camera.frame_rate_hz
+  (--fps is then ignored), exposed for exposure_s and delivered latency_frames late. Ctrl-C or
+  SIGTERM stops it.
 """
 
 from __future__ import annotations
@@ -18,6 +20,7 @@ from pathlib import Path
 
 from drivers.camera import OpenCvCamera, OpenCvCameraConfig
 from drivers.interfaces import Camera
+from sim_backend.cell.timing import add_timing_argument, cell_timing, timing_from_args
 from sim_backend.emulators.mjpeg.server import MjpegServer
 from sim_backend.emulators.val.command import wait_for_stop_signal
 
@@ -33,12 +36,15 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--chroma", choices=["444", "420"], default="444",
                         help="JPEG chroma subsampling (default 444; many network cameras send "
                              "420, which biases saturation-channel localisation by ~0.2 mm)")
+    add_timing_argument(parser)
 
 
 def run(args: argparse.Namespace) -> int:
     with contextlib.ExitStack() as stack:
         camera = stack.enter_context(_camera(args, stack))
-        server = stack.enter_context(MjpegServer(camera, port=args.port, fps=args.fps,
+        timing = timing_from_args(args) if args.source is None else None
+        fps = timing.camera.frame_rate_hz if timing else args.fps
+        server = stack.enter_context(MjpegServer(camera, port=args.port, fps=fps,
                                                  jpeg_quality=args.jpeg_quality,
                                                  chroma=args.chroma))
         print(server.stream_url, server.snapshot_url, flush=True)
@@ -57,4 +63,6 @@ def _camera(args: argparse.Namespace, stack: contextlib.ExitStack) -> Camera:
     from sim_backend.devices import SimCamera
 
     scene = load_scene(args.config) if args.config else SceneConfig()
-    return SimCamera(stack.enter_context(SimCell(scene, seed=args.seed)))
+    config = timing_from_args(args)
+    timing = cell_timing("realistic", config, wall=True) if config else None
+    return SimCamera(stack.enter_context(SimCell(scene, seed=args.seed)), timing)

@@ -6,7 +6,11 @@ Example: finepos bench val --json out/bench-val.json
   ``speed 50``) many times through ValArm and prints, per command, the median round trip, the
   bytes on the line (command out; echo, output and prompt back) and the time those bytes would
   take on the real 9600-baud 8N1 line (10 bits per byte, both directions one after the other):
-  the pty's overhead is then a small fraction of what the real line costs.
+  the pty's overhead is then a small fraction of what the real line costs. Then, with the
+  emulator's realistic timing (``--timed-repeats`` exchanges each, default 5: they take real
+  seconds), ``where``, ``speed 50`` and a 5 mm out-and-back move: the wall-clock round trip
+  next to the wire time the paced line took and the motion time the arm took
+  (``timed.<command>``: ``wall_ms``, ``wire_ms``, ``motion_ms``, ``other_ms``).
 """
 
 from __future__ import annotations
@@ -29,6 +33,8 @@ BITS_PER_BYTE = 10  # start bit, 8 data bits, stop bit
 def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--json", metavar="OUT", required=True, help="write the results here")
     parser.add_argument("--repeats", type=int, default=300, help="exchanges per command")
+    parser.add_argument("--timed-repeats", type=int, default=5,
+                        help="exchanges per command against the realistic emulator (default 5)")
 
 
 def measure(arm: ValArm, call: Callable[[], object], repeats: int) -> dict[str, float]:
@@ -60,6 +66,41 @@ def run(args: argparse.Namespace) -> int:
             ValArm(ValConfig(port=emulator.url)) as arm:
         commands = {"where": arm.pose, "speed": lambda: arm.set_speed(50)}
         results = {name: measure(arm, call, args.repeats) for name, call in commands.items()}
-    report = {"transport": "pty", "repeats": args.repeats, "commands": results}
+    report = {"transport": "pty", "repeats": args.repeats, "commands": results,
+              "timed": measure_timed(max(1, args.timed_repeats))}
     write_json(args.json, report)
     return 0
+
+
+def measure_timed(repeats: int) -> dict[str, dict[str, float]]:
+    """Wall time, wire time and motion time of ``where``, ``speed 50`` and a 5 mm move (there
+    and back, one exchange each way) against the emulator with realistic timing."""
+    from drivers.core.pose import ToolStep
+    from drivers.core.timing import TimingConfig
+    from sim_backend.cell.scene_config import SceneConfig
+    from sim_backend.cell.sim_cell import SimCell
+    from sim_backend.emulators.cell import CellEmulators
+
+    with SimCell(SceneConfig()) as cell, \
+            CellEmulators(cell, timing=TimingConfig()) as emulators, \
+            ValArm(ValConfig(port=emulators.val_url)) as arm:
+        link, timing = emulators.val._link, emulators.timing
+        home = arm.pose()
+        targets = [home.moved_in_tool_frame(ToolStep(5.0, 0.0, 0.0, 0.0)), home]
+        moves = iter(targets * repeats * 2)
+        commands = {"where": arm.pose, "speed": lambda: arm.set_speed(50),
+                    "move_5mm": lambda: arm.move_to(next(moves))}
+        out = {}
+        for name, call in commands.items():
+            rows = []
+            for _ in range(repeats):
+                wire0, motion0 = link.wire_s, timing.motion_s
+                start = time.perf_counter()
+                call()
+                wall = time.perf_counter() - start
+                rows.append((wall, link.wire_s - wire0, timing.motion_s - motion0))
+            wall, wire, motion = (statistics.median(r[i] for r in rows) for i in range(3))
+            out[name] = {"wall_ms": wall * 1e3, "wire_ms": wire * 1e3, "motion_ms": motion * 1e3,
+                         "other_ms": (wall - wire - motion) * 1e3}
+        arm.set_speed(100)
+    return out

@@ -4,7 +4,10 @@ Example: finepos sim val-emulator --pty --boot-questions
 
   prints ``VAL emulator on PORT`` (PORT: ``/dev/pts/N``, or ``socket://127.0.0.1:N`` with
   --tcp; use it as ``arm: {type: val, port: PORT}``), then serves the simulated cell's arm until
-  SIGINT or SIGTERM. The scene comes from the ``scene:`` section of --config FILE. Fault
+  SIGINT or SIGTERM. The scene comes from the ``scene:`` section of --config FILE, the
+  durations from its ``timing:`` section: with --timing realistic (the default) the line runs
+  at the VAL baud rate (9600) both ways and ``do move`` answers after the motion time;
+  --timing ideal answers at once. Fault
   knobs: --reply-delay-s, --drop-link-after-lines, --garbage HEX, --forced-error TEXT (see
   sim_backend.emulators.val.server.ValFaults).
 
@@ -31,6 +34,7 @@ import yaml
 from drivers.core.errors import ConfigError
 from drivers.core.files import atomic_write_text
 from drivers.core.typed_config import load_yaml_file
+from sim_backend.cell.timing import add_timing_argument, timing_from_args
 from sim_backend.emulators.cell import DEFAULT_FPS, CellEmulators
 from sim_backend.emulators.val.server import DEFAULT_GARBAGE, ValFaults
 
@@ -65,9 +69,11 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                         help="also serve the hand camera as an MJPEG stream on "
                              "http://127.0.0.1:PORT (0: any free port)")
     parser.add_argument("--fps", type=float, default=DEFAULT_FPS,
-                        help=f"frame rate of the stream (default {DEFAULT_FPS:g})")
+                        help=f"frame rate of the stream with --timing ideal (default "
+                             f"{DEFAULT_FPS:g}; realistic: timing.camera.frame_rate_hz)")
     parser.add_argument("--write-config", metavar="FILE", type=Path,
                         help="write a config file whose devices are these emulators")
+    add_timing_argument(parser)
 
 
 class StopSignals:
@@ -125,7 +131,7 @@ def run(args: argparse.Namespace) -> int:
         emulators = stack.enter_context(CellEmulators(
             cell, val_tcp_port=args.tcp, ati=args.ati, ati_tcp_port=args.ati_tcp,
             mjpeg_port=args.mjpeg, fps=args.fps, boot_questions=args.boot_questions,
-            faults=faults))
+            faults=faults, timing=timing_from_args(args)))
         stop = stack.enter_context(StopSignals())
         devices = emulators.device_sections()
         print(f"VAL emulator on {emulators.val_url}", flush=True)

@@ -7,7 +7,8 @@ unconfirmed commands the VAL driver's defaults send):
 - prompt ``.`` at the start of a line after every command; questions end in ``? ``;
 - optional boot questions ``Load VAL from floppy (Y/N)?`` then ``Initialize (Y/N)?``;
 - ``where`` (``X Y Z O A T`` table, then ``JT1..JT6`` when the pose has a joint solution),
-  ``speed N``, ``do move trans(x,y,z,o,a,t)``, ``do move name``, ``do move #name``,
+  ``speed N`` (0.01..327.67, 100 normal), ``do move trans(x,y,z,o,a,t)``, ``do move name``,
+  ``do move #name``,
   ``do drive joint,deg,speed``, ``do ready``, ``do nest``, ``point #name`` / ``point name``
   (``poi``) with their ``Change?`` dialogues, ``cal`` + ``y``; unconfirmed: ``do openi``,
   ``do closei`` (also ``do open`` / ``do close``), ``abort``;
@@ -26,6 +27,7 @@ from dataclasses import dataclass
 
 from drivers.core.errors import FineposError, MotionRejectedError
 from drivers.core.pose import Pose
+from drivers.core.timing import VAL_SPEED_MAX, VAL_SPEED_MIN
 from drivers.interfaces import Arm
 from sim_backend.emulators.val.kinematics import (
     NEST_DEG,
@@ -186,7 +188,7 @@ class ValMonitor:
 
     def _speed(self, rest: str) -> bytes:
         (percent,) = _numbers(rest, 1)
-        if not 0 < percent <= 100:
+        if not VAL_SPEED_MIN <= percent <= VAL_SPEED_MAX:
             raise _Refusal(VALUE_OUT_OF_RANGE)
         self._arm_call(self._arm.set_speed, percent)
         return _text([], PROMPT)
@@ -230,7 +232,7 @@ class ValMonitor:
         joint, delta_deg, speed_percent = _numbers(argument, 3)
         if joint != int(joint) or not 1 <= joint <= 6:
             raise _Refusal(SYNTAX_ERROR)
-        if not 0 < speed_percent <= 100:
+        if not VAL_SPEED_MIN <= speed_percent <= VAL_SPEED_MAX:
             raise _Refusal(VALUE_OUT_OF_RANGE)
         joints = self._joints(self._arm_call(self._arm.pose))
         if joints is None:

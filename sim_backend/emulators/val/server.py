@@ -55,12 +55,18 @@ class ValFaults:
 class ValEmulator(LinkServer):
     """Serves the VAL II monitor for ``arm`` on a new pty, or on ``tcp_port`` (0: any free port).
 
-    lines_handled: input lines answered since start (logged at close).
+    lines_handled: input lines answered since start (logged at close). baud: pace the line at
+    this rate (``--timing realistic``: ``timing.val_baud``; None: unpaced). How long a motion
+    takes is the arm's business: a SimArm with a wall-clock ``CellTiming`` returns from a move
+    only after its motion time, so ``do move`` answers its prompt then; ``on_line`` is called
+    as each line arrives, before it is run (``CellTiming.begin_command``).
     """
 
     def __init__(self, arm: Arm, *, tcp_port: int | None = None, boot_questions: bool = False,
-                 kinematics: Puma260 | None = None, faults: ValFaults | None = None) -> None:
-        super().__init__(tcp_port)
+                 kinematics: Puma260 | None = None, faults: ValFaults | None = None,
+                 baud: float | None = None, on_line: Callable[[], None] | None = None) -> None:
+        super().__init__(tcp_port, baud)
+        self._on_line = on_line
         self._monitor = ValMonitor(arm, kinematics, boot_questions)
         self._faults = faults or ValFaults()
         self._lines_since_faults = 0
@@ -116,6 +122,8 @@ class ValEmulator(LinkServer):
                 self._assembler = LineAssembler()
                 link.hang_up()
                 return
+            if self._on_line is not None:
+                self._on_line()
             response = self._monitor.handle_line(line, faults.forced_error)
             link.write(response.echo)
             if faults.reply_delay_s > 0:

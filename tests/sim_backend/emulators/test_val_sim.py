@@ -51,7 +51,8 @@ def test_bench_writes_round_trips_and_wire_times(tmp_path):
     parser = argparse.ArgumentParser()
     bench.add_arguments(parser)
     out = tmp_path / "bench-val.json"
-    assert bench.run(parser.parse_args(["--json", str(out), "--repeats", "20"])) == 0
+    assert bench.run(parser.parse_args(["--json", str(out), "--repeats", "20",
+                                        "--timed-repeats", "1"])) == 0
     report = json.loads(out.read_text())
     for name in ("where", "speed"):
         numbers = report["commands"][name]
@@ -60,6 +61,12 @@ def test_bench_writes_round_trips_and_wire_times(tmp_path):
         assert numbers["wire_time_ms_at_9600_baud"] == pytest.approx(wire_ms)
     assert report["commands"]["where"]["bytes_received"] > report["commands"]["speed"][
         "bytes_received"]
+    timed = report["timed"]  # the realistic emulator: wall time next to wire and motion time
+    assert timed["where"]["wire_ms"] == pytest.approx(272.9, rel=0.01)
+    assert timed["where"]["motion_ms"] == 0.0
+    assert timed["move_5mm"]["motion_ms"] > 0.0
+    assert timed["move_5mm"]["wall_ms"] >= timed["move_5mm"]["wire_ms"] + timed["move_5mm"][
+        "motion_ms"] - 5.0
 
 
 def read_line_starting(process: subprocess.Popen, prefix: str) -> str:

@@ -40,7 +40,8 @@ def test_evaluate_hil_converges_to_the_safe_tolerance(state_dir, tmp_path, capsy
     states_path = tmp_path / "states.json"
     capsys.readouterr()
     assert main(["evaluate", "--hil", "--model", str(model_path), "--trials", "3",
-                 "--seed", "2", "--quiet", "--states", str(states_path)]) == 0
+                 "--seed", "2", "--quiet", "--states", str(states_path),
+                 "--timing", "ideal"]) == 0  # realistic HIL runs in real time
     report = json.loads(capsys.readouterr().out)
     finals = [trace[-1] for trace in json.loads(states_path.read_text())]
     assert report["hil"] is True

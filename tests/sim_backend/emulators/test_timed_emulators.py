@@ -1,0 +1,109 @@
+"""The emulators with realistic timing: paced lines, moves that last, the two clocks agree,
+and ``finepos fit-timing`` recovers the emulator's own motion model."""
+
+from __future__ import annotations
+
+import dataclasses
+import statistics
+import time
+
+import pytest
+
+from controller.commands.fit_timing import fitted_config, time_moves
+from controller.config import config_from_mapping
+from controller.devices import open_devices
+from controller.evaluation.hil import open_hil_devices
+from drivers.core.pose import ToolStep
+from drivers.core.timing import ArmTiming, TimingConfig, fit_arm_timing, wire_time_s
+from drivers.val import ValArm, ValConfig
+from sim_backend.cell import timing as cell_timing
+from sim_backend.cell.scene_config import SceneConfig
+from sim_backend.cell.sim_cell import SimCell
+from sim_backend.emulators.cell import CellEmulators
+
+ARM = ArmTiming(t0_s=0.1, joint_speed_deg_s=40.0, joint_accel_deg_s2=150.0, settle_s=0.05,
+                hand_time_s=0.3)
+
+
+@pytest.fixture
+def timed_val():
+    """A realistic VAL emulator at 9600 baud on a fresh cell, and the driver on it."""
+    with SimCell(SceneConfig(), seed=2) as cell, \
+            CellEmulators(cell, timing=TimingConfig(arm=ARM)) as emulators, \
+            ValArm(ValConfig(port=emulators.val_url)) as arm:
+        yield arm, emulators
+
+
+def _timed(action) -> float:
+    start = time.perf_counter()
+    action()
+    return time.perf_counter() - start
+
+
+@pytest.mark.slow
+def test_where_at_9600_baud_takes_its_wire_time(timed_val):
+    arm, emulators = timed_val
+    seconds = statistics.median(_timed(arm.where) for _ in range(3))
+    assert seconds == pytest.approx(wire_time_s(cell_timing.where_bytes(), 9600), rel=0.10)
+
+
+@pytest.mark.slow
+def test_do_move_answers_after_the_motion(timed_val):
+    arm, emulators = timed_val
+    where_s = _timed(arm.where)
+    short = _timed(lambda: arm.move_tool(ToolStep(1.0, 0.0, 0.0, 0.0)))
+    long = _timed(lambda: arm.move_tool(ToolStep(20.0, 0.0, 0.0, 0.0)))
+    arm.set_speed(20)
+    slow = _timed(lambda: arm.move_tool(ToolStep(-20.0, 0.0, 0.0, 0.0)))
+    arm.set_speed(150)  # VAL takes speeds above 100
+    assert short > where_s + ARM.t0_s + ARM.settle_s
+    assert short < long < slow
+    assert emulators.timing.motion_s > 0
+
+
+@pytest.mark.slow
+def test_the_two_clocks_give_the_same_cell_seconds():
+    """The same scripted trial on the in-process cell (virtual clock) and through the real
+    drivers and the emulators (wall clock) takes the same cell seconds within 10%."""
+    config = config_from_mapping({"scene": {"timing": "realistic"},
+                                  "timing": {"arm": dataclasses.asdict(ARM)}})
+
+    def trial(devices) -> float:
+        start = devices.clock()
+        devices.arm.open_gripper()
+        for step in (ToolStep(8.0, -4.0, 0.0, 5.0), ToolStep(-3.0, 2.0, 0.0, -2.0),
+                     ToolStep(0.5, 0.5, 0.0, 0.5)):
+            devices.camera.grab()
+            devices.arm.move_tool(step)
+        devices.wrench.bias()
+        for _ in range(3):
+            devices.arm.move_tool(ToolStep(0.0, 0.0, 2.0, 0.0))
+            devices.wrench.read()
+        devices.arm.close_gripper()
+        devices.arm.move_tool(ToolStep(0.0, 0.0, -10.0, 0.0))
+        return devices.clock() - start
+
+    with open_devices(config, seed=4) as devices:
+        virtual = trial(devices)
+    with open_hil_devices(config, seed=4) as devices:
+        wall = trial(devices)
+    assert virtual > 3.0  # the trial takes real cell time, not the ideal cell's zero
+    assert wall == pytest.approx(virtual, rel=0.10)
+
+
+@pytest.mark.slow
+def test_fit_timing_recovers_the_emulators_own_parameters():
+    baud = 115200  # a faster line keeps the test short; the motion model is what is fitted
+    timing = TimingConfig(val_baud=baud, arm=ARM)
+    with SimCell(SceneConfig(), seed=5) as cell, \
+            CellEmulators(cell, timing=timing) as emulators, \
+            ValArm(ValConfig(port=emulators.val_url, baudrate=baud)) as arm:
+        moves = time_moves(arm, (1.0, 25.0), (25.0, 100.0), 2, out=None)
+    fit = fit_arm_timing(moves)
+    assert fit.t0_s == pytest.approx(ARM.t0_s + ARM.settle_s, abs=0.03)
+    assert fit.joint_speed_deg_s == pytest.approx(ARM.joint_speed_deg_s, rel=0.15)
+    assert fit.joint_accel_deg_s2 == pytest.approx(ARM.joint_accel_deg_s2, rel=0.15)
+    written = fitted_config({"scene": {"timing": "realistic"}}, fit)
+    assert written["timing"]["arm"]["settle_s"] == 0.0
+    assert config_from_mapping(written).timing.arm.joint_speed_deg_s == pytest.approx(
+        fit.joint_speed_deg_s, rel=1e-3)
