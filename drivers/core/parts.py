@@ -17,7 +17,8 @@ from dataclasses import dataclass
 
 from drivers.core.errors import ConfigError
 
-# The parallel-jaw gripper's full opening (mm): what the jaws open to before a grasp.
+# The parallel-jaw gripper's full opening (mm); before a grasp the jaws open to the part's
+# ``jaw_opening_mm``.
 GRIPPER_MAX_OPENING_MM = 40.0
 # Where the pre-grasp (taught) pose holds the fingertips above the part's top (mm): the grasp
 # descends this plus the part's grip depth.
@@ -33,8 +34,14 @@ class Part:
         kappa: rotational symmetry about the vertical (see the module docstring).
         grasp_width_mm: finger width when the part is held (across the jaws).
         grip_below_top_mm: how far below the part's top the fingertips go to grip it.
-        jaw_opening_mm: how wide the jaws open before the descent.
-        mass_g: the part's mass (for the weight the wrist sensor feels while it is held).
+        jaw_opening_mm: how wide the jaws open before the descent: a little wider than the
+            part (1.5 mm either side), which sets the grasp's tolerance (the paper's cube is
+            "little smaller than the open gripper"; 33 mm for our 30 mm cube, whose 6 mm
+            rounded edges would let 34 mm jaws pass it turned by 14.6 deg: README, "Grasp
+            tolerance").
+        mass_g: the part's mass (the weight the wrist sensor feels while it is held, which
+            the grasp check measures; the simulated part's dynamic mass).
+        material: what the part is made of (the simulated part's friction).
         color: the part's usual colour (RGB, 0..1).
     """
 
@@ -44,6 +51,7 @@ class Part:
     grip_below_top_mm: float
     jaw_opening_mm: float
     mass_g: float
+    material: str
     color: tuple[float, float, float]
 
     @property
@@ -57,13 +65,13 @@ SCREW_SHANK_RADIUS_MM = 5.5
 
 PARTS: dict[str, Part] = {
     "cube": Part("cube", kappa=4, grasp_width_mm=CUBE_EDGE_MM, grip_below_top_mm=15.0,
-                 jaw_opening_mm=GRIPPER_MAX_OPENING_MM, mass_g=15.0, color=(1.0, 0.85, 0.1)),
+                 jaw_opening_mm=33.0, mass_g=15.0, material="wood", color=(1.0, 0.85, 0.1)),
     "nut": Part("nut", kappa=6, grasp_width_mm=24.0, grip_below_top_mm=7.0,
-                jaw_opening_mm=GRIPPER_MAX_OPENING_MM, mass_g=5.0, color=(0.85, 0.2, 0.15)),
+                jaw_opening_mm=27.0, mass_g=5.0, material="wood", color=(0.85, 0.2, 0.15)),
     "ledge": Part("ledge", kappa=2, grasp_width_mm=22.0, grip_below_top_mm=5.0,
-                  jaw_opening_mm=GRIPPER_MAX_OPENING_MM, mass_g=8.0, color=(0.2, 0.55, 0.25)),
+                  jaw_opening_mm=25.0, mass_g=8.0, material="wood", color=(0.2, 0.55, 0.25)),
     "screw": Part("screw", kappa=1, grasp_width_mm=2.0 * SCREW_SHANK_RADIUS_MM,
-                  grip_below_top_mm=16.5, jaw_opening_mm=GRIPPER_MAX_OPENING_MM, mass_g=4.0,
+                  grip_below_top_mm=16.5, jaw_opening_mm=14.0, mass_g=4.0, material="wood",
                   color=(0.95, 0.45, 0.1)),
 }
 

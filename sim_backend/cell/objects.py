@@ -22,6 +22,10 @@ from drivers.core.pose import rot_y, rot_z
 from sim_backend.cell import meshes
 from sim_backend.cell.meshes import Mesh
 
+# Friction coefficient of each material of the parts (a judgement: wood on a painted table
+# top; the finger pads' own friction is in ``grasp_physics``).
+MATERIAL_FRICTION = {"wood": 0.5}
+
 
 @dataclass(frozen=True)
 class Cylinder:
@@ -55,6 +59,11 @@ class PartSpec(Part):
     @property
     def mesh(self) -> Mesh:
         return self.geometry.mesh
+
+    @property
+    def friction(self) -> float:
+        """Coulomb friction of the part's material (with the table and the finger pads)."""
+        return MATERIAL_FRICTION[self.material]
 
     @cached_property
     def height_mm(self) -> float:

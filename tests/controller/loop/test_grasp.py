@@ -1,5 +1,6 @@
 """Force guards (pure) and the guarded grasp sequence on fakes."""
 
+import numpy as np
 import pytest
 
 from controller.loop.grasp import GraspConfig, guarded_grasp
@@ -8,6 +9,7 @@ from drivers.interfaces import Wrench
 from tests.mocks.fakes import FakeArm, FakeWrenchSensor
 
 ZERO = Wrench(0, 0, 0, 0, 0, 0)
+BY_WIDTH = GraspConfig(check="width")
 
 
 def w(fz=0.0, fx=0.0, tz=0.0):
@@ -58,15 +60,24 @@ def setup(contact_depth_mm, object_width_mm=30.0):
 def test_grasp_succeeds_when_free_descent_reaches_depth():
     arm, sensor = setup(contact_depth_mm=100.0)
     start = arm.pose()
-    res = guarded_grasp(arm, sensor, 40.0, 30.0, GraspConfig())
+    res = guarded_grasp(arm, sensor, 40.0, 30.0, BY_WIDTH)
     assert res.success and res.depth_mm == pytest.approx(40.0)
     assert arm.pose().z_mm == pytest.approx(start.z_mm - 40.0 + 30.0)  # lifted 30 mm
+
+
+def test_the_free_descent_is_one_move_and_the_guards_read_after_it():
+    arm, sensor = setup(contact_depth_mm=100.0)
+    res = guarded_grasp(arm, sensor, 40.0, 30.0, BY_WIDTH)
+    assert res.success and len(res.forces_n) == 1 + 10  # 30 mm at once, then 1 mm steps
+    arm, sensor = setup(contact_depth_mm=10.0)  # something 10 mm down: 20 mm too deep at once
+    res = guarded_grasp(arm, sensor, 40.0, 30.0, BY_WIDTH)
+    assert not res.success and res.retreated and res.forces_n == [80.0]
 
 
 def test_early_contact_retreats_to_start():
     arm, sensor = setup(contact_depth_mm=10.0)
     start = arm.pose()
-    res = guarded_grasp(arm, sensor, 40.0, 30.0, GraspConfig())
+    res = guarded_grasp(arm, sensor, 40.0, 30.0, GraspConfig(check="width", free_descent_mm=0.0))
     assert not res.success and res.retreated and "early contact" in res.reason
     assert res.depth_mm < 20.0
     assert arm.pose() == start and arm.finger_width_mm() == 40.0
@@ -74,14 +85,14 @@ def test_early_contact_retreats_to_start():
 
 def test_contact_in_the_expected_zone_stops_and_grips():
     arm, sensor = setup(contact_depth_mm=38.5)
-    res = guarded_grasp(arm, sensor, 40.0, 30.0, GraspConfig())
+    res = guarded_grasp(arm, sensor, 40.0, 30.0, BY_WIDTH)
     assert res.success and "contact" in res.reason and res.depth_mm == pytest.approx(40.0)
 
 
 def test_empty_grip_fails_the_width_check_and_retreats():
     arm, sensor = setup(contact_depth_mm=100.0, object_width_mm=None)
     start = arm.pose()
-    res = guarded_grasp(arm, sensor, 40.0, 30.0, GraspConfig())
+    res = guarded_grasp(arm, sensor, 40.0, 30.0, BY_WIDTH)
     assert not res.success and "grip check failed" in res.reason
     assert arm.pose() == start
 
@@ -98,8 +109,67 @@ class Held:
         return w(fz=self.weight_n if self.arm._pose.z_mm > self.lowest + 1.0 else 0.0)
 
 
+class Noisy:
+    """``inner``'s reading plus Gaussian force noise (``sigma_n``) on every component."""
+
+    def __init__(self, inner, sigma_n, seed=0):
+        self.inner, self.sigma, self.rng = inner, sigma_n, np.random.default_rng(seed)
+
+    def __call__(self):
+        r = self.inner()
+        fx, fy, fz = np.array([r.fx_n, r.fy_n, r.fz_n]) + self.rng.normal(0.0, self.sigma, 3)
+        return Wrench(fx, fy, fz, r.tx_nm, r.ty_nm, r.tz_nm)
+
+
+CUBE_N = 0.015 * 9.81
+
+
+@pytest.mark.parametrize("weight_n,success", [
+    (CUBE_N, True),   # the cube hangs in the jaws
+    (0.0, False),     # the jaws closed on nothing: the wrist feels no weight
+])
+def test_weight_check_is_the_default_and_beats_the_noise(weight_n, success):
+    # A VAL-like gripper: it reports 0 mm however it closed, so the width says nothing; the
+    # noise (0.05 N, an ATI count) is a third of the cube's weight, one reading would be a
+    # coin toss against half of it; the mean of 16 is not.
+    for seed in range(10):
+        arm, sensor = setup(contact_depth_mm=100.0, object_width_mm=0.0)
+        sensor._reading = Noisy(Held(arm, weight_n), 0.05, seed)
+        start = arm.pose()
+        res = guarded_grasp(arm, sensor, 40.0, 30.0, GraspConfig(), part_weight_n=CUBE_N)
+        assert res.success is success, res.reason
+        assert res.held_weight_n == pytest.approx(weight_n, abs=0.05)
+        if not success:
+            assert "N on the wrist" in res.reason and arm.pose() == start
+
+
+def test_the_weight_check_needs_a_threshold_and_a_lift():
+    arm, sensor = setup(contact_depth_mm=100.0)
+    with pytest.raises(ValueError, match="min_held_weight_n"):
+        guarded_grasp(arm, sensor, 40.0, 30.0, GraspConfig())
+    with pytest.raises(ValueError, match="lift_mm"):
+        GraspConfig(lift_mm=0.0)
+
+
+class Jammed:
+    """A finger lands on the part as the jaws close: the wrist feels it pushed up."""
+
+    def __init__(self, arm):
+        self.arm = arm
+
+    def __call__(self):
+        return w(fz=-8.0 if self.arm.finger_width_mm() < 35.0 else 0.0)
+
+
+def test_a_finger_jammed_while_closing_fails_the_grasp():
+    arm, sensor = setup(contact_depth_mm=100.0)
+    sensor._reading = Jammed(arm)
+    res = guarded_grasp(arm, sensor, 40.0, 30.0, GraspConfig(min_held_weight_n=0.05))
+    assert not res.success and "jammed" in res.reason
+    assert res.closing_force_n == pytest.approx(8.0)
+
+
 @pytest.mark.parametrize("weight_n,min_n,success", [
-    (0.15, 0.0, True),     # check off
     (0.15, 0.08, True),    # the part's weight is felt
     (0.0, 0.08, False),    # jaws closed on nothing the width check could see (VAL)
 ])
@@ -107,7 +177,8 @@ def test_held_weight_check(weight_n, min_n, success):
     arm, sensor = setup(contact_depth_mm=100.0)
     sensor._reading = Held(arm, weight_n)
     start = arm.pose()
-    res = guarded_grasp(arm, sensor, 40.0, 30.0, GraspConfig(min_held_weight_n=min_n))
+    res = guarded_grasp(arm, sensor, 40.0, 30.0, GraspConfig(check="both",
+                                                            min_held_weight_n=min_n))
     assert res.success is success
     assert res.held_weight_n == pytest.approx(weight_n)
     if not success:

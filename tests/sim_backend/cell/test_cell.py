@@ -25,11 +25,11 @@ from sim_backend.cell.sim_cell import (
     SimCell,
 )
 
-QUIET = SceneConfig(camera=CameraConfig(noise_std=0.0))
+QUIET = SceneConfig(camera=CameraConfig(preset="ideal", noise_std=0.0))
 
 
 def _scene(**sections) -> SceneConfig:
-    data = {"camera": {"noise_std": 0.0}, **sections}
+    data = {"camera": {"preset": "ideal", "noise_std": 0.0}, **sections}
     return from_mapping(SceneConfig, data, "scene")
 
 
@@ -195,7 +195,7 @@ def test_images_are_deterministic_except_for_noise():
     with SimCell(QUIET, seed=2) as a, SimCell(QUIET, seed=2) as b:
         assert np.array_equal(a.render(), b.render())
         assert np.array_equal(a.render(), a.render())
-    noisy = SceneConfig()
+    noisy = SceneConfig(camera=CameraConfig(preset="ideal"))
     with SimCell(noisy, seed=2) as a, SimCell(noisy, seed=2) as b:
         first = a.render()
         assert np.array_equal(first, b.render()), "the noise is seeded"
