@@ -86,6 +86,7 @@ class Service:
         self._started_at = time.time()
         self._log: IterationLog | None = None
         self._server: ControlServer | None = None
+        self._live_view = None
         self._fp: FinePositioner | None = None
         self._job: Job | None = None
         self._job_thread: threading.Thread | None = None
@@ -125,6 +126,7 @@ class Service:
             self._log.subscribe(self._on_record)
             logger.info("iteration records go to %s", log_path)
             stack.callback(self._cell.close)
+            self._live_view = self._start_live_view(stack)
             self._server = stack.enter_context(
                 ControlServer(self.socket_path, cfg.service, policy, self, token))
             stack.callback(lambda: self._server.close(self._stop_budget_s(0.6)))
@@ -447,11 +449,54 @@ class Service:
             job.done.wait()
         return {"job": job.report()}
 
+    def _start_live_view(self, stack: contextlib.ExitStack):
+        """With ``service.live_view_port``: the annotated hand-camera image of every look as
+        MJPEG on 127.0.0.1 (closed with the service); None otherwise."""
+        port = self.config.service.live_view_port
+        if port is None:
+            return None
+        from controller.recording.live import LiveView
+        from sim_backend.emulators.mjpeg.server import MjpegServer
+
+        live = LiveView()
+        server = stack.enter_context(MjpegServer(live, port=port))
+        logger.info("live view on %s", server.stream_url)
+        return live
+
+    @contextlib.contextmanager
+    def _job_recording(self, job: Job, fp: FinePositioner):
+        """Record a position or grasp job (``service.record_dir``: ``job-<id>-<kind>.mcap``)
+        and show its looks on the live view, for the job's duration."""
+        record_dir = self.config.service.record_dir
+        recorders = []
+        if record_dir is not None and job.kind in ("position", "grasp"):
+            from controller.recording.writer import RunRecorder
+
+            recorders.append(RunRecorder(Path(record_dir) / f"job-{job.id:05d}-{job.kind}.mcap"))
+        if self._live_view is not None:
+            recorders.append(self._live_view)
+        if not recorders:
+            yield
+            return
+        from controller.recording.live import Tee
+
+        fp.recorder = recorders[0] if len(recorders) == 1 else Tee(*recorders)
+        try:
+            yield
+        finally:
+            fp.recorder = None
+            for recorder in recorders:
+                if recorder is not self._live_view:
+                    try:
+                        recorder.close()
+                    except OSError as exc:
+                        logger.warning("job %d: recording not finished: %s", job.id, exc)
+
     def _run_job(self, job: Job, fp: FinePositioner) -> None:
         exc: Exception | None = None
         result = None
         try:
-            with self._device_lock:
+            with self._device_lock, self._job_recording(job, fp):
                 result = BODIES[job.kind](JobContext(fp, job.args, self._models))
         except JobFailed as failed:
             exc, result = failed, failed.result
