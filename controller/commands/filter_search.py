@@ -1,13 +1,23 @@
-"""``finepos filter-search``: the paper's Fig. 5, Gabor filter sets trained and evaluated
-repeatedly, locally in parallel or on a Ray cluster."""
+"""The paper's Fig. 5: compare Gabor filter sets (mean and spread).
+
+Acquire the training grids once; per repeat (seeds SEED, SEED+1, ...) train the base system and
+acquire a random test set; then per filter set and repeat retrain NN2 on that set's features
+and measure the rotation RMS on the test set (open loop) and the whole system on random
+placements (closed loop, RMS after 2.5 loops). Writes DIR/filter_search.json, .md and .png
+(bars like Fig. 5). Jobs run on --workers local processes, or on a Ray cluster with --ray
+ADDRESS (needs pip install 'finepos[ray]' here and finepos on every node). The filter sets
+are listed at the end of --help.
+
+Example: finepos filter-search --repeats 10 --trials 20 --out out/fig5
+"""
 
 from __future__ import annotations
 
+import argparse
 import os
 import sys
 
 from controller.commands.common import (
-    add_command,
     add_config_file_option,
     config_from_args,
     positive_int,
@@ -17,7 +27,7 @@ from controller.evaluation.comparison.filter_search import run_filter_search
 from controller.evaluation.comparison.filter_sets import FILTER_SETS, PAPER_SET, select_sets
 
 
-def cmd_filter_search(args) -> int:
+def run(args) -> int:
     """Run the filter-set search, write its files to ``--out``, print the Markdown summary."""
     config = config_from_args(args)
     names = [n.strip() for n in args.sets.split(",") if n.strip()] if args.sets else None
@@ -32,34 +42,22 @@ def cmd_filter_search(args) -> int:
     return 0
 
 
-def register(subparsers) -> None:
-    """Add ``finepos filter-search``."""
-    p = add_command(
-        subparsers, "filter-search",
-        help="the paper's Fig. 5: compare Gabor filter sets (mean and spread)",
-        description="Example: finepos filter-search --repeats 10 --trials 20 --out out/fig5\n\n"
-                    "Acquire the training grids once; per repeat (seeds SEED, SEED+1, ...) "
-                    "train the base system and acquire a random test set; then per filter set "
-                    "and repeat retrain NN2 on that set's features and measure the rotation "
-                    "RMS on the test set (open loop) and the whole system on random "
-                    "placements (closed loop, RMS after 2.5 loops). Writes "
-                    "DIR/filter_search.json, .md and .png (bars like Fig. 5). Jobs run on "
-                    "--workers local processes, or on a Ray cluster with --ray ADDRESS "
-                    "(needs pip install 'finepos[ray]' here and finepos on every node).\n\n"
-                    f"Filter sets (the paper's: {PAPER_SET}):\n  " + "\n  ".join(FILTER_SETS))
-    add_config_file_option(p)
-    p.add_argument("--out", required=True, metavar="DIR", help="output folder")
-    p.add_argument("--repeats", type=positive_int, default=10, help="repeats per filter set")
-    p.add_argument("--trials", type=positive_int, default=20,
-                   help="closed-loop placements per filter set and repeat")
-    p.add_argument("--seed", type=int, default=1)
-    p.add_argument("--sets", metavar="NAMES",
-                   help="comma-separated filter-set names (default: all, listed above)")
-    p.add_argument("--workers", type=positive_int, default=os.cpu_count() or 1,
-                   help="parallel local processes (default: one per core; 1 runs in this "
-                        "process)")
-    p.add_argument("--ray", metavar="ADDRESS",
-                   help="run the jobs on this Ray cluster instead: auto (the running one), "
-                        "local (start one here), ray://HOST:10001")
-    p.add_argument("--quiet", action="store_true", help="no progress bars")
-    p.set_defaults(func=cmd_filter_search)
+def add_arguments(parser: argparse.ArgumentParser) -> None:
+    """The options of ``finepos filter-search``."""
+    parser.epilog = (f"Filter sets (the paper's: {PAPER_SET}):\n  "
+                     + "\n  ".join(FILTER_SETS))
+    add_config_file_option(parser)
+    parser.add_argument("--out", required=True, metavar="DIR", help="output folder")
+    parser.add_argument("--repeats", type=positive_int, default=10, help="repeats per filter set")
+    parser.add_argument("--trials", type=positive_int, default=20,
+                        help="closed-loop placements per filter set and repeat")
+    parser.add_argument("--seed", type=int, default=1)
+    parser.add_argument("--sets", metavar="NAMES",
+                        help="comma-separated filter-set names (default: all, listed above)")
+    parser.add_argument("--workers", type=positive_int, default=os.cpu_count() or 1,
+                        help="parallel local processes (default: one per core; 1 runs in this "
+                             "process)")
+    parser.add_argument("--ray", metavar="ADDRESS",
+                        help="run the jobs on this Ray cluster instead: auto (the running one), "
+                             "local (start one here), ray://HOST:10001")
+    parser.add_argument("--quiet", action="store_true", help="no progress bars")

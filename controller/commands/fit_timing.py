@@ -1,19 +1,18 @@
-"""``finepos fit-timing``: time real moves through the VAL driver and fit the arm's motion model.
+"""Time moves on a real VAL arm and fit the timing model's t0, joint speed and acceleration.
 
-No public source gives the PUMA 260's joint speeds, accelerations or settling, so the
-``timing.arm`` defaults are judgements. This command measures them on the arm in ``--config``
-(``arm: {type: val, ...}``): at each speed it moves the tool by each distance along its x and
-y axes and back, repeated, timing every ``move_to`` through the driver; the seconds of motion
-are that time less the ``where`` exchanges the driver makes around a move (one, two with
-``arm.where_after_move``; their median, timed separately) and the move command's own wire
-time. With the joints' travel from the ``where`` replies (``JT1..JT6``),
-``drivers.core.timing.fit_arm_timing`` fits t0, the joint speed and the acceleration;
-``--write-config`` writes them into a copy of the config (``timing.arm``; t0_s then includes
-the settling, settle_s is 0), so the emulated cell takes that arm's time.
+Moves the tool of the VAL arm in --config by 1, 5, 10 and 25 mm along its x and y axes and back
+at speeds 25, 50 and 100, repeated, times each move through the driver, fits the motion model t
+= t0 + max_j T(dq_j, v*s, a*s) (trapezoidal joint profiles, s = speed/100) and prints t0_s,
+joint_speed_deg_s, joint_accel_deg_s2 and the fit's rms as JSON. --write-config writes --config
+with timing.arm set to the fit (t0_s includes the settling; settle_s 0). The arm must stand with
+room for 25 mm around it; speed is left at 100.
+
+Example: finepos fit-timing --config cell.yaml --write-config cell-fitted.yaml
 """
 
 from __future__ import annotations
 
+import argparse
 import statistics
 import sys
 import time
@@ -21,7 +20,7 @@ from pathlib import Path
 
 import yaml
 
-from controller.commands.common import add_command, config_from_args
+from controller.commands.common import config_from_args
 from controller.config import config_from_mapping
 from drivers.core.errors import ConfigError, FineposError
 from drivers.core.files import atomic_write_text, write_json
@@ -102,7 +101,7 @@ def fitted_config(base: dict, fit: ArmFit) -> dict:
     return data
 
 
-def cmd_fit_timing(args) -> int:
+def run(args) -> int:
     """Time the moves, fit, print the fit (JSON), write the config if asked."""
     from drivers.val import ValArm
 
@@ -135,29 +134,15 @@ def cmd_fit_timing(args) -> int:
     return 0
 
 
-def register(subparsers) -> None:
-    """Add ``finepos fit-timing``."""
-    p = add_command(
-        subparsers, "fit-timing",
-        help="time moves on a real VAL arm and fit the timing model's t0, joint speed and "
-             "acceleration",
-        description="Example: finepos fit-timing --config cell.yaml --write-config "
-                    "cell-fitted.yaml\n\nMoves the tool of the VAL arm in --config by 1, 5, "
-                    "10 and 25 mm along its x and y axes and back at speeds 25, 50 and 100, "
-                    "repeated, times each move through the driver, fits the motion model "
-                    "t = t0 + max_j T(dq_j, v*s, a*s) (trapezoidal joint profiles, s = "
-                    "speed/100) and prints t0_s, joint_speed_deg_s, joint_accel_deg_s2 and "
-                    "the fit's rms as JSON. --write-config writes --config with timing.arm "
-                    "set to the fit (t0_s includes the settling; settle_s 0). The arm must "
-                    "stand with room for 25 mm around it; speed is left at 100.")
-    p.add_argument("--config", required=True, metavar="FILE",
-                   help="config whose arm is the VAL arm to time")
-    p.add_argument("--write-config", metavar="OUT", help="write the config with the fit here")
-    p.add_argument("--distances", default=",".join(f"{d:g}" for d in DEFAULT_DISTANCES_MM),
-                   help="move distances in mm (default 1,5,10,25)")
-    p.add_argument("--speeds", default=",".join(f"{s:g}" for s in DEFAULT_SPEEDS),
-                   help="VAL speeds in percent (default 25,50,100)")
-    p.add_argument("--repeats", type=int, default=2, choices=range(1, 21), metavar="1..20",
-                   help="moves per distance and speed, alternating x and y (default 2)")
-    p.add_argument("--json", metavar="OUT", help="also write the fit here")
-    p.set_defaults(func=cmd_fit_timing)
+def add_arguments(parser: argparse.ArgumentParser) -> None:
+    """The options of ``finepos fit-timing``."""
+    parser.add_argument("--config", required=True, metavar="FILE",
+                        help="config whose arm is the VAL arm to time")
+    parser.add_argument("--write-config", metavar="OUT", help="write the config with the fit here")
+    parser.add_argument("--distances", default=",".join(f"{d:g}" for d in DEFAULT_DISTANCES_MM),
+                        help="move distances in mm (default 1,5,10,25)")
+    parser.add_argument("--speeds", default=",".join(f"{s:g}" for s in DEFAULT_SPEEDS),
+                        help="VAL speeds in percent (default 25,50,100)")
+    parser.add_argument("--repeats", type=int, default=2, choices=range(1, 21), metavar="1..20",
+                        help="moves per distance and speed, alternating x and y (default 2)")
+    parser.add_argument("--json", metavar="OUT", help="also write the fit here")

@@ -1,23 +1,25 @@
-"""``finepos grasp-sweep``: the physical grasp's tolerance, measured on the simulated cell.
+"""Measure the physical grasp's tolerance on the simulated cell.
 
-Guarded grasps (``controller.loop.grasp``, with the config's ``controller.grasp``) start from
-known offsets of the nominal pre-grasp pose, one axis at a time: across the jaws (tool y),
-along them (tool x) and in rotation about the approach axis, each from 0 to ``--max-mm`` /
-``--max-deg``; ``--grid`` adds a map of across x rotation. A point succeeds when the grasp
-reports success and the part hangs seated in the jaws after the lift (``SEAT_PHI_DEG``,
-``SEAT_TILT_DEG``). An axis's tolerance is the largest offset up to which every point of it
-succeeded. Compare the paper: "grasping tolerance of about 2 mm and 5-8 deg".
+Guarded grasps of the simulated part from known offsets of the nominal pose: across the jaws,
+along them and in rotation, each from 0 to --max-mm / --max-deg (--grid: also across x
+rotation). A point succeeds when the part is held after the lift and seated (turned and tilted
+in the jaws at most the limit given at the end of --help); an axis's tolerance is the largest
+offset up to which all its points succeeded. Prints the JSON report (points, tolerance); --out
+writes grasp_sweep.png.
+
+Example: finepos grasp-sweep --json out/sweep.json --out out/sweep
 """
 
 from __future__ import annotations
 
+import argparse
 import math
 import sys
 from pathlib import Path
 
 import numpy as np
 
-from controller.commands.common import add_command, add_config_file_option, config_from_args
+from controller.commands.common import add_config_file_option, config_from_args
 from controller.devices import open_devices
 from controller.loop.grasp import guarded_grasp
 from drivers.core.errors import ConfigError
@@ -145,7 +147,7 @@ def write_map(report: dict, path: Path) -> None:
     plt.close(fig)
 
 
-def cmd_grasp_sweep(args) -> int:
+def run(args) -> int:
     """``finepos grasp-sweep``: see the module docstring."""
     for name in ("max_mm", "step_mm", "max_deg", "step_deg"):
         value = getattr(args, name)
@@ -169,28 +171,19 @@ def cmd_grasp_sweep(args) -> int:
     return 0
 
 
-def register(subparsers) -> None:
-    """Add ``finepos grasp-sweep``."""
-    p = add_command(
-        subparsers, "grasp-sweep",
-        help="measure the physical grasp's tolerance on the simulated cell",
-        description="Example: finepos grasp-sweep --json out/sweep.json --out out/sweep\n\n"
-                    "Guarded grasps of the simulated part from known offsets of the nominal "
-                    "pose: across the jaws, along them and in rotation, each from 0 to "
-                    "--max-mm / --max-deg (--grid: also across x rotation). A point succeeds "
-                    "when the part is held after the lift and seated (turned and tilted at "
-                    f"most {SEAT_PHI_DEG:g} deg in the jaws); an axis's tolerance is the largest "
-                    "offset up to which all its points succeeded. Prints the JSON report "
-                    "(points, tolerance); --out writes grasp_sweep.png.")
-    add_config_file_option(p)
-    p.add_argument("--json", metavar="OUT", required=True, help="write the JSON report here")
-    p.add_argument("--out", metavar="DIR", help="write the PNG map grasp_sweep.png here")
-    p.add_argument("--max-mm", type=float, default=6.0, help="largest offset (mm; default 6)")
-    p.add_argument("--step-mm", type=float, default=0.25, help="offset step (mm; default 0.25)")
-    p.add_argument("--max-deg", type=float, default=20.0,
-                   help="largest rotation (deg; default 20)")
-    p.add_argument("--step-deg", type=float, default=1.0, help="rotation step (deg; default 1)")
-    p.add_argument("--grid", action="store_true", help="also sweep across x rotation together")
-    p.add_argument("--seed", type=int, default=0, help="the cell's seed (repeatability errors, "
-                                                       "sensor noise)")
-    p.set_defaults(func=cmd_grasp_sweep)
+def add_arguments(parser: argparse.ArgumentParser) -> None:
+    """The options of ``finepos grasp-sweep``."""
+    parser.epilog = f"Seated: turned and tilted at most {SEAT_PHI_DEG:g} deg in the jaws."
+    add_config_file_option(parser)
+    parser.add_argument("--json", metavar="OUT", required=True, help="write the JSON report here")
+    parser.add_argument("--out", metavar="DIR", help="write the PNG map grasp_sweep.png here")
+    parser.add_argument("--max-mm", type=float, default=6.0, help="largest offset (mm; default 6)")
+    parser.add_argument("--step-mm", type=float, default=0.25,
+                        help="offset step (mm; default 0.25)")
+    parser.add_argument("--max-deg", type=float, default=20.0,
+                        help="largest rotation (deg; default 20)")
+    parser.add_argument("--step-deg", type=float, default=1.0,
+                        help="rotation step (deg; default 1)")
+    parser.add_argument("--grid", action="store_true", help="also sweep across x rotation together")
+    parser.add_argument("--seed", type=int, default=0,
+                        help="the cell's seed (repeatability errors, sensor noise)")

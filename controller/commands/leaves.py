@@ -21,13 +21,21 @@ def register_group(subparsers, name: str, help_text: str, leaves: dict[str, str]
     group = subparsers.add_parser(name, help=help_text, description=help_text)
     sub = group.add_subparsers(dest=f"{name}_command", metavar="COMMAND", required=True)
     for leaf, module_name in leaves.items():
-        module = importlib.import_module(module_name)
-        doc = (module.__doc__ or "").strip()
-        first = doc.splitlines()[0] if doc else leaf
-        parser = sub.add_parser(leaf, help=first, description=example_first(doc),
-                                formatter_class=argparse.RawDescriptionHelpFormatter)
-        module.add_arguments(parser)
-        parser.set_defaults(func=module.run)
+        add_leaf(sub, leaf, importlib.import_module(module_name))
+
+
+def add_leaf(subparsers, name: str, module) -> argparse.ArgumentParser:
+    """Add subcommand ``name`` from a leaf module: help from its docstring's first line, the
+    docstring (``Example:`` line first) as description, its ``add_arguments`` and ``run``."""
+    doc = (module.__doc__ or "").strip()
+    first = doc.splitlines()[0].rstrip(".") if doc else name
+    if first[:1].isupper() and not first[1:2].isupper():  # a sentence; --help lists phrases
+        first = first[0].lower() + first[1:]
+    parser = subparsers.add_parser(name, help=first, description=example_first(doc),
+                                   formatter_class=argparse.RawDescriptionHelpFormatter)
+    module.add_arguments(parser)
+    parser.set_defaults(func=module.run)
+    return parser
 
 
 def example_first(doc: str) -> str:

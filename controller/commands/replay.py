@@ -1,10 +1,18 @@
-"""``finepos replay``: a run recording as a video and a contact sheet, overlays drawn."""
+"""Draw a run recording's overlays onto its frames: MP4 video, contact sheet.
+
+Read a recording (finepos position/grasp/evaluate --record) and draw, on every look's hand-
+camera frame, the part's centre (red), its blob box (yellow), the ROI (blue), the Gabor filter
+centres (green), the taught centre (white cross) and the commanded step's expected image motion
+(magenta arrow), with the loop kind, loop count, step and, on the simulated cell, the true error
+when the frame was taken. One video frame and one sheet tile per look.
+
+Example: finepos replay run.mcap --out run.mp4 --sheet run.png
+"""
 
 from __future__ import annotations
 
 import argparse
 
-from controller.commands.common import add_command
 from controller.recording.replay import read_looks, write_sheet, write_video
 from drivers.core.errors import ConfigError
 from drivers.core.files import write_json
@@ -21,7 +29,7 @@ def positive_float(text: str) -> float:
     return value
 
 
-def cmd_replay(args) -> int:
+def run(args) -> int:
     """Read the recording, write the video and/or the sheet, print what was written (JSON)."""
     if args.out is None and args.sheet is None:
         raise ConfigError("replay: give --out FILE.mp4, --sheet FILE.png or both")
@@ -36,26 +44,14 @@ def cmd_replay(args) -> int:
     return 0
 
 
-def register(subparsers) -> None:
-    """Add ``finepos replay``."""
-    p = add_command(
-        subparsers, "replay",
-        help="draw a run recording's overlays onto its frames: MP4 video, contact sheet",
-        description="Example: finepos replay run.mcap --out run.mp4 --sheet run.png\n\n"
-                    "Read a recording (finepos position/grasp/evaluate --record) and draw, on "
-                    "every look's hand-camera frame, the part's centre (red), its blob box "
-                    "(yellow), the ROI (blue), the Gabor filter centres (green), the taught "
-                    "centre (white cross) and the commanded step's expected image motion "
-                    "(magenta arrow), with the loop kind, loop count, step and, on the "
-                    "simulated cell, the true error when the frame was taken. One video "
-                    "frame and one sheet tile per look.")
-    p.add_argument("recording", metavar="FILE.mcap", help="the recording")
-    p.add_argument("--out", metavar="FILE.mp4", help="write the video here")
-    p.add_argument("--sheet", metavar="FILE.png", help="write the contact sheet here")
-    p.add_argument("--fps", type=positive_float, default=2.0,
-                   help="video frames (looks) per second (default 2)")
-    p.add_argument("--scale", type=int, choices=range(1, 9), default=4, metavar="1..8",
-                   help="video frame size in camera frames (default 4: 768x576)")
-    p.add_argument("--columns", type=int, choices=range(1, 17), default=4, metavar="1..16",
-                   help="contact sheet tiles per row (default 4)")
-    p.set_defaults(func=cmd_replay)
+def add_arguments(parser: argparse.ArgumentParser) -> None:
+    """The options of ``finepos replay``."""
+    parser.add_argument("recording", metavar="FILE.mcap", help="the recording")
+    parser.add_argument("--out", metavar="FILE.mp4", help="write the video here")
+    parser.add_argument("--sheet", metavar="FILE.png", help="write the contact sheet here")
+    parser.add_argument("--fps", type=positive_float, default=2.0,
+                        help="video frames (looks) per second (default 2)")
+    parser.add_argument("--scale", type=int, choices=range(1, 9), default=4, metavar="1..8",
+                        help="video frame size in camera frames (default 4: 768x576)")
+    parser.add_argument("--columns", type=int, choices=range(1, 17), default=4, metavar="1..16",
+                        help="contact sheet tiles per row (default 4)")

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import argparse
 import json
 
 import cv2
@@ -61,3 +62,22 @@ def test_bench_measures_the_three_medians(tmp_path):
     assert main(["bench", "sim", "--repeats", "10", "--json", str(out)]) == 0
     written = json.loads(out.read_text())
     assert {"cpu", "render_ms", "move_ms", "look_and_move_ms", "meets_target"} <= set(written)
+
+
+def test_every_subcommands_help_starts_with_its_example():
+    from controller.cli import build_parser
+
+    parser = build_parser()
+    groups = [parser]
+    seen = 0
+    while groups:
+        group = groups.pop()
+        for action in group._actions:
+            if isinstance(action, argparse._SubParsersAction):
+                for name, sub in action.choices.items():
+                    if any(isinstance(a, argparse._SubParsersAction) for a in sub._actions):
+                        groups.append(sub)
+                    else:
+                        seen += 1
+                        assert (sub.description or "").startswith("Example: finepos "), name
+    assert seen >= 20
