@@ -1,7 +1,9 @@
 """The ``finepos`` command: one entry point, one subcommand module per job.
 
-Each module in COMMAND_MODULES defines ``register(subparsers)``, which adds its subcommand(s)
-and sets ``func`` (taking the parsed args, returning an exit code) as the parser default.
+A module in COMMAND_MODULES is either one subcommand, named after the module, whose docstring
+is its help (first line) and description (``Example:`` line first), with ``add_arguments`` and
+``run`` (see ``controller.commands.leaves``); or it defines ``register(subparsers)``, which adds
+several subcommands or a group. ``run`` takes the parsed args and returns the exit code.
 """
 
 from __future__ import annotations
@@ -10,8 +12,11 @@ import argparse
 import importlib
 import logging
 import os
+import signal
 import sys
+import threading
 
+from controller.commands.leaves import add_leaf
 from drivers.core.errors import FineposError
 
 COMMAND_MODULES = (
@@ -23,6 +28,10 @@ COMMAND_MODULES = (
     "controller.commands.ctl",
     "controller.commands.table1",
     "controller.commands.filter_search",
+    "controller.commands.check",
+    "controller.commands.fit_timing",
+    "controller.commands.grasp_sweep",
+    "controller.commands.replay",
 )
 
 logger = logging.getLogger("finepos")
@@ -38,7 +47,11 @@ def build_parser() -> argparse.ArgumentParser:
     parser.add_argument("-v", "--verbose", action="store_true", help="debug logging on stderr")
     sub = parser.add_subparsers(dest="command", metavar="COMMAND", required=True)
     for name in COMMAND_MODULES:
-        importlib.import_module(name).register(sub)
+        module = importlib.import_module(name)
+        if hasattr(module, "register"):  # several subcommands, or a group
+            module.register(sub)
+        else:  # one subcommand, named after its module (fit_timing: fit-timing)
+            add_leaf(sub, name.rpartition(".")[2].replace("_", "-"), module)
     return parser
 
 
@@ -56,21 +69,69 @@ def setup_logging(verbose: bool) -> None:
 def main(argv: list[str] | None = None) -> int:
     """Parse ``argv`` (None: ``sys.argv[1:]``), set up logging and run the chosen subcommand.
 
+    Every failure ends in one line on stderr, never a traceback (``-v`` adds it to the log).
+
     Returns:
-        The exit status: the subcommand's (None counts as 0), 2 after a FineposError (printed as
-        ``finepos: error: ...``), 130 after Ctrl-C. Bad arguments make argparse exit with 2.
+        The exit status: the subcommand's (None counts as 0); 2 after a FineposError such as an
+        unloadable config (printed as ``finepos: error: ...``; for ``finepos serve`` under
+        systemd this status is final: the unit's ``RestartPreventExitStatus=2``); 1 after an
+        OS error (a full disk, a missing folder...) or an unexpected error (``finepos: internal
+        error: ...``), which systemd restarts after ``RestartSec``; 130 after Ctrl-C, 143 after
+        SIGTERM (files being written keep their old contents). Bad
+        arguments make argparse exit with 2.
     """
     parser = build_parser()
     args = parser.parse_args(argv)
     setup_logging(args.verbose)
+    previous = _terminate_on_sigterm()
     try:
         return int(args.func(args) or 0)
+    except Terminated:
+        print("finepos: terminated (SIGTERM); files being written keep their old contents",
+              file=sys.stderr)
+        return 143
     except FineposError as exc:
-        print(f"finepos: error: {exc}", file=sys.stderr)
+        print(f"finepos: error: {_one_line(exc)}", file=sys.stderr)
         return 2
     except KeyboardInterrupt:
         print("finepos: interrupted", file=sys.stderr)
         return 130
+    except OSError as exc:
+        logger.debug("OS error", exc_info=exc)
+        where = f" ({exc.filename})" if getattr(exc, "filename", None) else ""
+        print(f"finepos: error: {exc.strerror or _one_line(exc)}{where}", file=sys.stderr)
+        return 1
+    except Exception as exc:  # a bug: one line for the user, the traceback with -v
+        logger.debug("internal error", exc_info=exc)
+        print(f"finepos: internal error: {type(exc).__name__}: {_one_line(exc)} (run with -v "
+              "for the traceback)", file=sys.stderr)
+        return 1
+    finally:
+        if previous is not None:
+            signal.signal(signal.SIGTERM, previous)
+
+
+class Terminated(BaseException):
+    """Raised in the main thread by SIGTERM, so an interrupted command (train, acquire) unwinds:
+    atomic writes remove their temporary file and the old file stays."""
+
+
+def _terminate_on_sigterm():
+    """Install the SIGTERM handler raising Terminated; returns the previous handler (None when
+    not in the main thread). ``finepos serve`` installs its own for its run."""
+    if threading.current_thread() is not threading.main_thread():
+        return None
+
+    def terminate(_signum, _frame):
+        raise Terminated
+
+    return signal.signal(signal.SIGTERM, terminate)
+
+
+def _one_line(exc: BaseException) -> str:
+    """The exception's message on one line, at most 500 characters."""
+    text = " ".join(str(exc).split())
+    return text if len(text) <= 500 else text[:497] + "..."
 
 
 if __name__ == "__main__":

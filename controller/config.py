@@ -2,7 +2,8 @@
 
 Sections: ``arm``, ``camera``, ``wrench`` (backend ``type`` plus that backend's options, see
 ``controller.devices``), ``scene`` (the simulated cell), ``safety``, ``perception``,
-``controller``, ``service`` (``finepos serve``). Unknown keys, wrong types and out-of-range
+``controller``, ``service`` (``finepos serve``), ``timing`` (the realistic cell's durations,
+``drivers.core.timing``). Unknown keys, wrong types and out-of-range
 values fail at load with the full key path. With no file, every default applies: the simulated
 cell, good light, the cube.
 """
@@ -23,6 +24,7 @@ from controller.loop.positioning import LoopConfig
 from controller.service.config import ServiceConfig
 from controller.teach.spacenav import TeachConfig
 from drivers.core.errors import ConfigError
+from drivers.core.timing import TimingConfig
 from drivers.core.typed_config import from_mapping, load_yaml_file
 from drivers.safety import SafetyLimits
 from sim_backend.cell.scene_config import PartKind, SceneConfig
@@ -79,7 +81,8 @@ class ControllerConfig:
 class PerceptionConfig:
     """Config section ``perception``: the Gabor filter bank and the networks.
 
-    nn2_hidden: hidden layer sizes of NN2 (NN1 is the paper's 2-3-2); nn2_weight_decay: L2
+    nn2_hidden: hidden layer sizes of NN2, 1 to 8 layers of 1 to 4096 units (NN1 is the paper's
+    2-3-2); nn2_weight_decay: L2
     penalty on NN2's weights, so it interpolates between the grid's angles;
     localisation_channel: the image the part is localised in (``max``: normalised max(R,G,B),
     the paper's; ``saturation``: unchanged by light and shadow for a coloured part; ``auto``:
@@ -90,13 +93,17 @@ class PerceptionConfig:
     """
 
     gabor: GaborConfig = GaborConfig()
-    nn2_hidden: tuple[int, ...] = field(default=NN2_HIDDEN, metadata={"min": 1})
+    nn2_hidden: tuple[int, ...] = field(default=NN2_HIDDEN, metadata={"min": 1, "max": 4096})
     nn2_weight_decay: float = field(default=NN2_WEIGHT_DECAY, metadata={"min": 0.0})
     localisation_channel: Literal["max", "saturation", "auto"] = "auto"
     pca: PcaConfig = PcaConfig()
     hough: HoughConfig = HoughConfig()
     seed: int = 0
     nn1_uses_nn2_set: bool = True
+
+    def __post_init__(self) -> None:
+        if not 1 <= len(self.nn2_hidden) <= 8:  # with <= 4096 units each: fits in memory
+            raise ValueError(f"nn2_hidden: 1 to 8 hidden layers, got {len(self.nn2_hidden)}")
 
 
 @dataclass(frozen=True)
@@ -111,10 +118,12 @@ class FineposConfig:
     perception: PerceptionConfig = PerceptionConfig()
     controller: ControllerConfig = ControllerConfig()
     service: ServiceConfig = ServiceConfig()
+    timing: TimingConfig = TimingConfig()
     source: str = "<defaults>"
 
 
-SECTIONS = ("arm", "camera", "wrench", "scene", "safety", "perception", "controller", "service")
+SECTIONS = ("arm", "camera", "wrench", "scene", "safety", "perception", "controller", "service",
+            "timing")
 
 
 def config_from_mapping(data: dict[str, Any], source: str = "<mapping>") -> FineposConfig:
@@ -131,6 +140,7 @@ def config_from_mapping(data: dict[str, Any], source: str = "<mapping>") -> Fine
         perception=from_mapping(PerceptionConfig, data.get("perception"), "perception"),
         controller=from_mapping(ControllerConfig, data.get("controller"), "controller"),
         service=from_mapping(ServiceConfig, data.get("service"), "service"),
+        timing=from_mapping(TimingConfig, data.get("timing"), "timing"),
         source=source,
     )
 

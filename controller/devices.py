@@ -10,6 +10,7 @@ from __future__ import annotations
 
 import contextlib
 import dataclasses
+import time
 from collections.abc import Callable
 from dataclasses import dataclass
 from typing import Any
@@ -51,6 +52,7 @@ class DeviceContext:
         self.config = config
         self.seed = seed
         self._cell = None
+        self._timing = None
         self._stack = contextlib.ExitStack()
 
     @property
@@ -66,6 +68,23 @@ class DeviceContext:
         return self._cell
 
     @property
+    def timing(self):
+        """The simulated cell's timing (``sim_backend.cell.timing.CellTiming``: a virtual clock
+        when ``scene.timing`` is realistic), or None when ideal. Shared by the simulated
+        devices."""
+        if self._timing is None and self.config.scene.timing != "ideal":
+            from sim_backend.cell.timing import cell_timing
+
+            self._timing = cell_timing(self.config.scene.timing, self.config.timing)
+        return self._timing
+
+    def clock(self) -> float:
+        """Cell seconds: the virtual cell clock when the cell is simulated with realistic
+        timing, else wall time (``time.monotonic``)."""
+        timing = self._timing
+        return timing.clock.now() if timing is not None else time.monotonic()
+
+    @property
     def has_cell(self) -> bool:
         """Whether a simulated cell was built."""
         return self._cell is not None
@@ -78,7 +97,7 @@ class DeviceContext:
 def _sim_arm(options, ctx: DeviceContext) -> Arm:
     from sim_backend.devices import SimArm
 
-    return SimArm(ctx.cell, ctx.config.safety)
+    return SimArm(ctx.cell, ctx.config.safety, ctx.timing)
 
 
 def _val_arm(options, ctx: DeviceContext) -> Arm:
@@ -90,7 +109,7 @@ def _val_arm(options, ctx: DeviceContext) -> Arm:
 def _sim_camera(options, ctx: DeviceContext) -> Camera:
     from sim_backend.devices import SimCamera
 
-    return SimCamera(ctx.cell)
+    return SimCamera(ctx.cell, ctx.timing)
 
 
 def _opencv_camera(options, ctx: DeviceContext) -> Camera:
@@ -102,7 +121,7 @@ def _opencv_camera(options, ctx: DeviceContext) -> Camera:
 def _sim_wrench(options, ctx: DeviceContext) -> WrenchSensor:
     from sim_backend.devices import SimWrenchSensor
 
-    return SimWrenchSensor(ctx.cell)
+    return SimWrenchSensor(ctx.cell, ctx.timing)
 
 
 def _ati_wrench(options, ctx: DeviceContext) -> WrenchSensor:
@@ -162,12 +181,18 @@ def with_device(config, kind: str, backend_type: str, **options):
 
 @dataclass
 class CellDevices:
-    """The opened devices, and the simulated cell when the config uses one (else None)."""
+    """The opened devices, and the simulated cell when the config uses one (else None).
+
+    clock: cell seconds now (the simulated cell's virtual clock when its timing is realistic,
+    else wall time); timing: the simulated cell's ``CellTiming`` (None: ideal or no cell).
+    """
 
     arm: Arm
     camera: Camera
     wrench: WrenchSensor
     cell: Any
+    clock: Callable[[], float] = time.monotonic
+    timing: Any = None
 
     def ground_truth(self):
         """The gripper's error against the part's grasp pose, where the backend knows it."""
@@ -189,4 +214,4 @@ def open_devices(config, seed: int = 0, activate: bool = True):
             if activate:
                 device.activate()
             built.append(device)
-        yield CellDevices(*built, cell=ctx._cell)
+        yield CellDevices(*built, cell=ctx._cell, clock=ctx.clock, timing=ctx._timing)

@@ -39,13 +39,16 @@ class FinePositioner:
         config: the root config (``controller.config.FineposConfig``).
         log: where each loop iteration is written (None: not logged).
         state_dir: the cell's files (default ``controller.paths.state_dir``).
+        recorder: records every look and the grasp's readings (``controller.recording``;
+            None: not recorded).
     """
 
     def __init__(self, devices, config, log: IterationLog | None = None,
-                 state_dir: str | Path | None = None) -> None:
+                 state_dir: str | Path | None = None, recorder=None) -> None:
         self.devices = devices
         self.config = config
         self.log = log
+        self.recorder = recorder
         self.state_dir = Path(state_dir or config.controller.paths.state_dir)
         self._loop: PositioningLoop | None = None
         self._model: TrainedModel | None = None
@@ -179,10 +182,15 @@ class FinePositioner:
         taught on the taught part.
 
         Raises:
-            BundleError: the file is missing, damaged, of another system or another part.
+            FineposError: no model file there (the message says which command makes one).
+            BundleError: the file is damaged, of another system or another part.
         """
         state = self.state()
-        self._model = SYSTEMS[system].load(path or self.model_path(system), state)
+        file = Path(path) if path is not None else self.model_path(system)
+        if not file.is_file():
+            train = "finepos train" + ("" if system == "gabor" else f" --system {system}")
+            raise FineposError(f"{file}: no trained {system} model; run `{train}` first")
+        self._model = SYSTEMS[system].load(file, state)
         return self._model
 
     def use_model(self, model: TrainedModel) -> None:
@@ -205,7 +213,8 @@ class FinePositioner:
         estimator = SYSTEMS[self._model.system].estimator(self._model)
         truth = self.devices.ground_truth if self.devices.cell is not None else None
         self._loop = PositioningLoop(self.devices.arm, self.devices.camera,
-                                     self.config.controller.loop, self.log, truth)
+                                     self.config.controller.loop, self.log, truth,
+                                     recorder=self.recorder)
         try:
             return self._loop.run(estimator, max_loops)
         finally:
@@ -219,8 +228,16 @@ class FinePositioner:
             Whether the part is held, the guard that tripped (if any) and the readings.
         """
         state = self.state()
-        return guarded_grasp(self.devices.arm, self.devices.wrench, state.grasp_depth_mm,
-                             state.object_width_mm, self.config.controller.grasp)
+        recorder = self.recorder
+        clock = getattr(self.devices, "clock", None)  # cell seconds, for the recording
+        sensor = self.devices.wrench if recorder is None else \
+            recorder.recording_sensor(self.devices.wrench, clock)
+        weight_n = parts.part(state.object_kind).mass_g * 9.81e-3  # the taught part's
+        result = guarded_grasp(self.devices.arm, sensor, state.grasp_depth_mm,
+                               state.object_width_mm, self.config.controller.grasp, weight_n)
+        if recorder is not None:
+            recorder.grasp_event(result, clock() if clock is not None else None)
+        return result
 
     def abort(self) -> None:
         """Stop a running loop before its next move and halt the arm."""

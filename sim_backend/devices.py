@@ -4,24 +4,40 @@ They implement ``drivers.interfaces`` exactly like the real drivers, so the cont
 tell them apart. The cell belongs to whoever created it: disconnecting a device leaves the cell
 open (close the cell, or use it as a context manager, when done).
 
-Arm moves are atomic (inverse kinematics, then the joints are set), so ``halt`` has nothing to
-stop and the speed setting is only remembered. The wrench sensor reads the cell's contact
-model: forces the environment exerts on the tool, in the tool frame (z = approach axis), so
-pressing down onto the table gives Fz < 0.
+Arm moves are solved at once (inverse kinematics, then the joints are set). With a
+``CellTiming`` (``scene.timing: realistic``, ``sim_backend.cell.timing``) every action takes its
+modelled time on the cell clock: a move its joint-interpolated motion time at the set ``speed``
+plus settling, the hand its motion wait plus hand time, a frame the wait for the camera's next
+exposure plus its latency, a wrench reading the next sample; in process the VAL and ATI lines'
+wire time is charged too. ``pose()`` reports what the encoders see: where the servos stopped
+(during a timed move, the intermediate pose), not the mechanical repeatability error, which
+only the camera and the ground truth see (fed back through relative moves, an i.i.d. error
+would random-walk the unobserved tilt: 0.18 deg after 200 moves). On a wall clock (behind the
+emulators) a move really lasts that long and the arm passes through intermediate poses, so a
+frame exposed meanwhile is motion-blurred. Without a timing (``ideal``) everything is instant.
+The wrench sensor reads the cell's contact model: forces the environment exerts on the tool, in
+the tool frame (z = approach axis), so pressing down onto the table gives Fz < 0.
 """
 
 from __future__ import annotations
 
+import contextlib
 import time
 
 import numpy as np
 
-from drivers.core.errors import DeviceFaultError
+from drivers.core.errors import DeviceFaultError, FineposError
 from drivers.core.pose import Pose
+from drivers.core.timing import profile_fraction
 from drivers.interfaces import Arm, Camera, Frame, Wrench, WrenchSensor
 from drivers.safety import SafetyLimits
 from sim_backend.cell import hand_camera
+from sim_backend.cell import timing as cell_timing
 from sim_backend.cell.sim_cell import SimCell
+from sim_backend.cell.timing import CellTiming
+
+# Behind the emulators a timed move passes through intermediate poses this often (s).
+_ANIMATION_STEP_S = 0.02
 
 
 def _require_open(cell: SimCell, device: str) -> None:
@@ -30,11 +46,19 @@ def _require_open(cell: SimCell, device: str) -> None:
 
 
 class SimArm(Arm):
-    """The simulated PUMA 260 with its parallel-jaw gripper."""
+    """The simulated PUMA 260 with its parallel-jaw gripper.
 
-    def __init__(self, cell: SimCell, limits: SafetyLimits | None = None) -> None:
+    Args:
+        cell: the simulated cell.
+        limits: the safety layer (None behind the VAL emulator: the driver applies it).
+        timing: the realistic cell's timing (None: ideal, every action instant).
+    """
+
+    def __init__(self, cell: SimCell, limits: SafetyLimits | None = None,
+                 timing: CellTiming | None = None) -> None:
         super().__init__(limits)
         self.cell = cell
+        self.timing = timing
         self.speed_percent = 100.0
 
     def _open(self) -> None:
@@ -44,33 +68,115 @@ class SimArm(Arm):
         """Nothing to release: the cell stays open for the other devices."""
 
     def _read_pose(self) -> Pose:
+        # What the encoders see: where the servos stopped (an intermediate pose during a timed
+        # move); the mechanical repeatability error is invisible to them, as on a real arm.
+        if self.timing is not None:
+            self.timing.val_wire(cell_timing.where_bytes())
         return self.cell.arm_pose()
 
     def _move_to(self, target: Pose) -> Pose:
-        return self.cell.move_arm(target)
+        timing = self.timing
+        if timing is None:
+            return self.cell.move_arm(target)
+        begin = timing.take_command_start()  # wall clock: the work below counts as motion
+        start_q = np.array(self.cell.joint_angles_deg(), dtype=float)
+        start = self.cell.arm_pose()
+        timing.val_wire(cell_timing.move_bytes(target.as_dict()))
+        self.cell.move_arm(target)
+        delta = np.array(self.cell.joint_angles_deg(), dtype=float) - start_q
+        seconds = timing.move_seconds(delta, self.speed_percent)
+        if timing.clock.virtual:
+            timing.motion(seconds)
+            return self.cell.arm_pose()
+        self._animate(start, target, seconds, begin)
+        reached = self.cell.arm_pose()
+        timing.clock.advance(begin + seconds - timing.clock.now())  # the end of the settling
+        # As the VAL driver by default (arm.where_after_move: false): no read-back exchange.
+        return reached
+
+    def _animate(self, start: Pose, target: Pose, seconds: float, begin: float) -> None:
+        """Real time: pass through intermediate poses along the move, then end at the target;
+        waits to absolute deadlines from ``begin`` (when the move started), so the work of
+        each step does not lengthen the move."""
+        timing = self.timing
+        arm, clock = timing.config.arm, timing.clock
+        profile_s = max(0.0, seconds - arm.t0_s - arm.settle_s)
+        final = self.cell.arm_pose()
+        steps = int(profile_s / _ANIMATION_STEP_S)
+        if steps >= 2:
+            with contextlib.suppress(FineposError):  # back to the start: the move begins there
+                self.cell.move_arm(start)
+
+        def wait_until(offset_s: float) -> None:
+            clock.advance(begin + offset_s - clock.now())
+
+        wait_until(arm.t0_s)
+        if steps >= 2:
+            for i in range(1, steps):
+                elapsed = i * profile_s / steps
+                with contextlib.suppress(FineposError):  # a refused pose on the way: go on
+                    self.cell.move_arm(_interpolate(start, target,
+                                                    profile_fraction(elapsed, profile_s)))
+                wait_until(arm.t0_s + elapsed)
+            self.cell.move_arm(final)
+        timing.motion_s += seconds
 
     def _set_speed(self, percent: float) -> None:
         self.speed_percent = percent
+        if self.timing is not None:
+            self.timing.val_wire(cell_timing.val_exchange_bytes(f"speed {percent:g}"))
 
     def _halt(self) -> None:
-        """Moves are atomic: by the time halt can be called, the arm stands still."""
+        """Nothing to stop: in process a move is done when its call returns, and behind the VAL
+        emulator the monitor reads the halt only after the move's line was answered."""
 
     def _set_gripper(self, closed: bool) -> float:
-        return self.cell.close_gripper() if closed else self.cell.open_gripper()
+        timing = self.timing
+        begin = timing.take_command_start() if timing is not None else 0.0
+        width = self.cell.close_gripper() if closed else self.cell.open_gripper()
+        if timing is not None:
+            timing.val_wire(cell_timing.gripper_bytes(closed))
+            hand_s = timing.config.arm.hand_time_s
+            if timing.clock.virtual:
+                timing.motion(hand_s)
+            else:  # the jaws' own simulation counts as hand time
+                timing.motion_s += hand_s
+                timing.clock.advance(begin + hand_s - timing.clock.now())
+        return width
 
     def _finger_width_mm(self) -> float:
         return self.cell.finger_width_mm()
 
 
+def _interpolate(start: Pose, target: Pose, fraction: float) -> Pose:
+    """The pose ``fraction`` of the way from ``start`` to ``target`` (translation linear,
+    rotation about the tool axis linear; the tool keeps pointing as at the target)."""
+    step = start.tool_step_to(target)
+    scaled = type(step)(*(v * fraction for v in step.as_dict().values()))
+    return start.moved_in_tool_frame(scaled)
+
+
 class SimCamera(Camera):
-    """The hand camera: 192x144 RGB frames rendered from the cell."""
+    """The hand camera: 192x144 RGB frames rendered from the cell.
+
+    With a timing, frames start every 1 / ``timing.camera.frame_rate_hz`` s, are exposed for
+    ``exposure_s`` and delivered ``latency_frames`` frame periods after their exposure ended.
+    On the virtual clock ``grab`` waits for the next exposure to start, then for the exposure
+    and the latency (nothing moves meanwhile: the caller is the only actor). On a wall clock
+    (the MJPEG emulator grabbing at its frame rate) a frame is rendered at the start and the end
+    of its exposure and the two are blended when the arm moved in between (motion blur), and
+    each grab returns the frame exposed ``latency_frames`` grabs earlier.
+    """
 
     width_px = hand_camera.WIDTH_PX
     height_px = hand_camera.HEIGHT_PX
 
-    def __init__(self, cell: SimCell) -> None:
+    def __init__(self, cell: SimCell, timing: CellTiming | None = None) -> None:
         super().__init__()
         self.cell = cell
+        self.timing = timing
+        self._delivered: list[Frame] = []
+        self.blurred_frames = 0
 
     def _open(self) -> None:
         _require_open(self.cell, "SimCamera")
@@ -79,15 +185,45 @@ class SimCamera(Camera):
         """Nothing to release."""
 
     def _grab(self) -> Frame:
-        return Frame(self.cell.render(), time.monotonic())
+        timing = self.timing
+        if timing is None:
+            return Frame(self.cell.render(), time.monotonic())
+        cam = timing.config.camera
+        period = 1.0 / cam.frame_rate_hz
+        clock = timing.clock
+        if clock.virtual:
+            now = clock.now()
+            wait = (-now) % period
+            clock.advance(wait + cam.exposure_s + cam.latency_frames * period)
+            return Frame(self.cell.render(), clock.now())
+        frame = Frame(self._expose(cam.exposure_s), clock.now())
+        self._delivered.append(frame)
+        if len(self._delivered) <= cam.latency_frames:
+            return self._delivered[0]
+        return self._delivered.pop(0)
+
+    def _expose(self, exposure_s: float) -> np.ndarray:
+        """Render over one exposure on the wall clock: blended when the arm moved meanwhile."""
+        before = self.cell.true_tool_pose()
+        first = self.cell.render()
+        if exposure_s <= 0:
+            return first
+        self.timing.clock.advance(exposure_s)
+        if self.cell.true_tool_pose() == before:
+            return first
+        self.blurred_frames += 1
+        second = self.cell.render()
+        blend = (first.astype(np.uint16) + second.astype(np.uint16) + 1) // 2
+        return blend.astype(np.uint8)
 
 
 class SimWrenchSensor(WrenchSensor):
     """The wrist force-torque sensor: the cell's contact model, minus the bias."""
 
-    def __init__(self, cell: SimCell) -> None:
+    def __init__(self, cell: SimCell, timing: CellTiming | None = None) -> None:
         super().__init__()
         self.cell = cell
+        self.timing = timing
         self._offset = np.zeros(6)
 
     def _open(self) -> None:
@@ -97,6 +233,13 @@ class SimWrenchSensor(WrenchSensor):
         """Nothing to release."""
 
     def _read(self) -> Wrench:
+        timing = self.timing
+        if timing is not None:
+            # The next sample, then (in process) one query and record on the ATI line; the
+            # ATI emulator's line paces itself.
+            period = 1.0 / timing.config.wrench_rate_hz
+            timing.clock.advance((-timing.clock.now()) % period)
+            timing.wire(cell_timing.ATI_QR_BYTES, timing.config.ati_baud)
         return Wrench(*(float(v) for v in self.cell.wrench() - self._offset))
 
     def _bias(self) -> None:

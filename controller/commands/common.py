@@ -10,6 +10,7 @@ from pathlib import Path
 
 from controller.config import load_config
 from controller.loop.iteration_log import IterationLog
+from controller.recording.writer import RunRecorder
 from drivers.core.errors import ConfigError
 
 
@@ -101,3 +102,43 @@ def add_command(subparsers, name: str, *, help: str, description: str) -> argpar
         raise ValueError(f"finepos {name}: the help must start with 'Example: finepos ...'")
     return subparsers.add_parser(name, help=help, description=description,
                                  formatter_class=argparse.RawDescriptionHelpFormatter)
+
+
+def add_record_option(parser: argparse.ArgumentParser) -> None:
+    """``--record FILE.mcap``: record the run for Foxglove and ``finepos replay``."""
+    parser.add_argument("--record", metavar="FILE.mcap",
+                        help="record every look (frame, overlays, record, tool pose) and the "
+                             "grasp's wrench readings as MCAP (Foxglove; finepos replay)")
+
+
+@contextlib.contextmanager
+def run_recorder(args, max_runs: int | None = None):
+    """Context manager: the RunRecorder at ``--record`` (None without it), closed at the end.
+
+    The path is printed on stderr.
+    """
+    path = getattr(args, "record", None)
+    if path is None:
+        yield None
+        return
+    with RunRecorder(path, max_runs=max_runs) as recorder:
+        print(f"recording: {path}", file=sys.stderr)
+        yield recorder
+
+
+def add_timing_option(parser: argparse.ArgumentParser, default: str | None = "realistic") -> None:
+    """``--timing realistic|ideal``: the simulated cell's timing (``scene.timing``); realistic
+    takes the ``timing:`` section's durations (on a virtual clock in process, really on the
+    emulators' wire), ideal makes every action instant. None: the config's."""
+    parser.add_argument("--timing", choices=("realistic", "ideal"), default=default,
+                        help="the simulated cell's timing (default: "
+                             f"{default or 'scene.timing of the config'})")
+
+
+def with_timing(config, mode: str | None):
+    """``config`` with ``scene.timing`` replaced by ``mode`` (None: unchanged)."""
+    if mode is None:
+        return config
+    import dataclasses
+
+    return dataclasses.replace(config, scene=dataclasses.replace(config.scene, timing=mode))

@@ -1,31 +1,59 @@
-"""``finepos evaluate``: accuracy of a vision system on random placements (JSON report)."""
+"""Evaluate a system on random placements; JSON report.
+
+Example: finepos evaluate --system gabor --lighting poor --trials 100 --seed 1 --json out/poor.json
+
+Unless --model is given, first teach, acquire and train on the default scene; then test on the
+scene of --config with random part placements and start offsets uniform in +/-25 mm,
++/-180/kappa deg.
+
+Also: finepos evaluate --hil --model state/model-gabor.fpm --trials 20
+
+--hil: hardware in the loop on one machine: the same cell is served in this process over the
+VAL, ATI and MJPEG emulators, and every arm, camera and wrench exchange goes through the real
+drivers (placement and ground truth come from the cell).
+
+Also: finepos evaluate --mounts 10 --trials 50 --json out/mounts.json
+
+--mounts N: N random cameras (mount tilt +/-8 deg, roll and pan +/-4 deg, offset +/-5 mm, field
+of view +/-15 %, k1 in [-0.35, 0.1], vignetting, blur, gamma and auto-exposure varied; the rest
+as scene.camera), each taught, trained and tested on its own cell; one row per camera and a
+summary (worst and median camera). The method never sees a camera parameter.
+"""
 
 from __future__ import annotations
 
+import argparse
 import json
 from pathlib import Path
 
 from controller.commands.common import (
-    add_command,
     add_config_option,
+    add_timing_option,
     config_from_args,
     positive_int,
+    run_recorder,
+    with_timing,
 )
+from controller.evaluation.mounts import evaluate_mounts
 from controller.evaluation.trials import evaluate
 from controller.loop.iteration_log import IterationLog
 from controller.systems.registry import SYSTEMS
+from drivers.core.errors import ConfigError
 from drivers.core.files import write_json
 
 
-def cmd_evaluate(args) -> int:
+def run(args) -> int:
     """Run ``trials.evaluate`` with the options and print the JSON report (also to ``--json``)."""
-    config = config_from_args(args)
+    config = with_timing(config_from_args(args), args.timing)
+    if args.mounts is not None:
+        return _evaluate_mounts(args, config)
     log = IterationLog(args.log) if args.log else None
     try:
-        report = evaluate(args.system, config, trials=args.trials, seed=args.seed,
-                          lighting=args.lighting, model_path=args.model,
-                          grasp=not args.no_grasp, log=log, progress=not args.quiet,
-                          hil=args.hil)
+        with run_recorder(args, max_runs=args.record_trials) as recorder:
+            report = evaluate(args.system, config, trials=args.trials, seed=args.seed,
+                              lighting=args.lighting, model_path=args.model,
+                              grasp=not args.no_grasp, log=log, progress=not args.quiet,
+                              hil=args.hil, recorder=recorder)
     finally:
         if log:
             log.close()
@@ -36,32 +64,40 @@ def cmd_evaluate(args) -> int:
     return 0
 
 
-def register(subparsers) -> None:
-    """Add ``finepos evaluate``."""
-    p = add_command(
-        subparsers, "evaluate",
-        help="evaluate a system on random placements; JSON report",
-        description="Example: finepos evaluate --system gabor --lighting poor --trials 100 "
-                    "--seed 1 --json out/poor.json\n\nUnless --model is given, first teach, "
-                    "acquire and train on the default scene; then test on the scene of "
-                    "--config with random part placements and start offsets uniform in "
-                    "+/-25 mm, +/-180/kappa deg.\n\nExample: finepos evaluate --hil --model "
-                    "state/model-gabor.fpm --trials 20\n\n--hil: hardware in the loop "
-                    "on one machine: the same cell is served in this process over the VAL, ATI "
-                    "and MJPEG emulators, and every arm, camera and wrench exchange goes through "
-                    "the real drivers (placement and ground truth come from the cell).")
-    add_config_option(p)
-    p.add_argument("--system", default="gabor", choices=sorted(SYSTEMS))
-    p.add_argument("--lighting", choices=["good", "poor", "dim", "side"],
-                   help="override the scene's lighting preset")
-    p.add_argument("--trials", type=positive_int, default=100)
-    p.add_argument("--seed", type=int, default=1)
-    p.add_argument("--model", metavar="FILE", help="use this trained model (skip training)")
-    p.add_argument("--json", metavar="OUT", help="also write the report here")
-    p.add_argument("--log", metavar="FILE", help="per-iteration JSON Lines log")
-    p.add_argument("--states", metavar="FILE", help="write every trial's error trace (JSON)")
-    p.add_argument("--no-grasp", action="store_true", help="skip the grasp after positioning")
-    p.add_argument("--quiet", action="store_true", help="no progress bars")
-    p.add_argument("--hil", action="store_true",
-                   help="through the real drivers and the device emulators (see above)")
-    p.set_defaults(func=cmd_evaluate)
+def _evaluate_mounts(args, config) -> int:
+    """``--mounts N``: ``mounts.evaluate_mounts`` with the options; prints the JSON report."""
+    for option in ("model", "log", "states", "record"):
+        if getattr(args, option, None) is not None:
+            raise ConfigError(f"--{option}: not with --mounts (every camera is set up, trained "
+                              "and tested on its own)")
+    report = evaluate_mounts(args.system, config, mounts=args.mounts, trials=args.trials,
+                             seed=args.seed, lighting=args.lighting, grasp=not args.no_grasp,
+                             progress=not args.quiet, hil=args.hil)
+    write_json(args.json, report)
+    return 0
+
+
+def add_arguments(parser: argparse.ArgumentParser) -> None:
+    """The options of ``finepos evaluate``."""
+    add_config_option(parser)
+    parser.add_argument("--system", default="gabor", choices=sorted(SYSTEMS))
+    parser.add_argument("--lighting", choices=["good", "poor", "dim", "side"],
+                        help="override the scene's lighting preset")
+    parser.add_argument("--trials", type=positive_int, default=100)
+    parser.add_argument("--mounts", type=positive_int, metavar="N",
+                        help="evaluate on N random cameras and mounts (see above)")
+    parser.add_argument("--seed", type=int, default=1)
+    parser.add_argument("--model", metavar="FILE", help="use this trained model (skip training)")
+    parser.add_argument("--json", metavar="OUT", help="also write the report here")
+    parser.add_argument("--log", metavar="FILE", help="per-iteration JSON Lines log")
+    parser.add_argument("--states", metavar="FILE", help="write every trial's error trace (JSON)")
+    parser.add_argument("--record", metavar="FILE.mcap",
+                        help="record the first --record-trials trials (frames, overlays, records, "
+                             "wrench) as MCAP for Foxglove and finepos replay")
+    parser.add_argument("--record-trials", type=positive_int, default=3, metavar="N",
+                        help="how many trials --record keeps (default 3)")
+    parser.add_argument("--no-grasp", action="store_true", help="skip the grasp after positioning")
+    parser.add_argument("--quiet", action="store_true", help="no progress bars")
+    add_timing_option(parser)
+    parser.add_argument("--hil", action="store_true",
+                        help="through the real drivers and the device emulators (see above)")

@@ -18,6 +18,7 @@ BENCH_LEAVES = {
     "service": "controller.service.bench",
     "ati": "sim_backend.emulators.ati.bench",
     "camera-stream": "sim_backend.emulators.mjpeg.bench",
+    "recording": "controller.recording.bench",
 }
 
 

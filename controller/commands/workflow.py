@@ -6,10 +6,12 @@ from controller.commands.common import (
     add_command,
     add_config_option,
     add_log_option,
+    add_record_option,
     config_from_args,
     iteration_log,
     loop_budget,
     parse_triple,
+    run_recorder,
 )
 from controller.commands.device_options import add_device_options, apply_device_options
 from controller.devices import open_devices
@@ -87,31 +89,49 @@ def cmd_train(args) -> int:
 
 
 def cmd_position(args) -> int:
-    """Run the positioning loop (then ``--grasp``); 1 unless it converged or used its budget."""
+    """Run the positioning loop (then ``--grasp``); 1 unless it converged or used its budget.
+
+    The model is loaded before the iteration log and the recording are created: a run that
+    cannot start leaves no files."""
     config = _config(args)
     offset = parse_triple(args.offset, "--offset") if args.offset is not None else None
-    with open_devices(config) as devices, iteration_log(args, config) as log:
-        fp = _positioner(args, devices, config, log)
+    with open_devices(config) as devices:
+        fp = _positioner(args, devices, config)
         fp.load_model(args.model, args.system)
-        if offset is not None:
-            dx, dy, dphi = offset
-            fp.move_to(fp.state().nominal_pose.moved_in_tool_frame(
-                ToolStep(-dx, -dy, 0.0, -dphi)))
-        result = fp.position(args.max_loops)
-        report = {"run_id": result.run_id, "outcome": result.outcome, "reason": result.reason,
-                  "loops": result.loops, "iterations": result.iterations,
-                  "error": result.states[-1].error, "log": str(log.path)}
-        if args.grasp and result.ok:
-            report["grasp"] = fp.grasp().as_dict()
+        with iteration_log(args, config) as log, run_recorder(args) as recorder:
+            fp.log, fp.recorder = log, recorder
+            report = _position_run(args, fp, offset)
+    ok = report.pop("ok")
     write_json(None, report)
-    return 0 if result.ok else 1
+    return 0 if ok else 1
+
+
+def _position_run(args, fp: FinePositioner, offset) -> dict:
+    """The positioning run (and grasp) of ``finepos position``, as its JSON report plus
+    ``ok`` (converged or budget spent; taken out before printing)."""
+    if offset is not None:
+        dx, dy, dphi = offset
+        fp.move_to(fp.state().nominal_pose.moved_in_tool_frame(
+            ToolStep(-dx, -dy, 0.0, -dphi)))
+    result = fp.position(args.max_loops)
+    report = {"run_id": result.run_id, "outcome": result.outcome, "reason": result.reason,
+              "loops": result.loops, "iterations": result.iterations,
+              "error": result.states[-1].error, "log": str(fp.log.path)}
+    if args.record:
+        report["record"] = args.record
+    if args.grasp and result.ok:
+        report["grasp"] = fp.grasp().as_dict()
+    report["ok"] = result.ok
+    return report
 
 
 def cmd_grasp(args) -> int:
     """Run the force-guarded grasp from the current pose; 1 when it failed."""
     config = _config(args)
-    with open_devices(config) as devices:
-        result = _positioner(args, devices, config).grasp()
+    with open_devices(config) as devices, run_recorder(args) as recorder:
+        fp = _positioner(args, devices, config)
+        fp.recorder = recorder
+        result = fp.grasp()
     write_json(None, result.as_dict())
     return 0 if result.success else 1
 
@@ -181,6 +201,7 @@ def register(subparsers) -> None:
     add_config_option(p)
     add_device_options(p)
     add_log_option(p)
+    add_record_option(p)
     p.add_argument("--system", default="gabor", choices=sorted(SYSTEMS))
     p.add_argument("--model", metavar="FILE", help="model file (default: the state folder's)")
     p.add_argument("--offset", metavar="DX,DY,DPHI",
@@ -193,7 +214,9 @@ def register(subparsers) -> None:
         subparsers, "grasp",
         help="force-guarded grasp from the current pose",
         description="Example: finepos grasp\n\nDescend with the wrist sensor guarding, close, "
-                    "verify the grip, lift.")
+                    "verify the grip, lift. --record FILE.mcap records every wrench "
+                    "reading and how the grasp ended.")
     add_config_option(p)
     add_device_options(p)
+    add_record_option(p)
     p.set_defaults(func=cmd_grasp)

@@ -27,7 +27,7 @@ from tqdm import tqdm
 
 from controller.devices import open_devices
 from controller.evaluation.hil import open_hil_devices
-from controller.evaluation.metrics import summarise
+from controller.evaluation.metrics import summarise, wilson
 from controller.fine_positioner import FinePositioner
 from controller.systems.base import TrainedModel
 from controller.systems.registry import SYSTEMS
@@ -51,8 +51,18 @@ def with_lighting(config, preset: str | None):
 
 
 def default_scene_config(config):
-    """The config with every scene setting at its default (where training happens)."""
-    return dataclasses.replace(config, scene=type(config.scene)())
+    """The config with every scene setting at its default (where training happens), except
+    the camera: it belongs to the cell (``scene.camera``, at its ``mount``), and the timing."""
+    return dataclasses.replace(config, scene=type(config.scene)(camera=config.scene.camera,
+                                                                timing=config.scene.timing))
+
+
+def with_test_camera(config):
+    """The config with the camera as the cell is tested with it (``scene.camera.test_mount``,
+    if set, as its mount: the camera knocked after training)."""
+    scene = config.scene
+    return dataclasses.replace(config, scene=dataclasses.replace(
+        scene, camera=scene.camera.at_test()))
 
 
 def train_on_default_scene(system: str, config, work_dir: Path, seed: int,
@@ -86,26 +96,30 @@ def train_systems_on_default_scene(systems: Sequence[str], config, work_dir: Pat
 def run_trials(system: str, model: TrainedModel, config, trials: int, seed: int, *,
                work_dir: Path, grasp: bool = True, log=None, progress: bool = True,
                budget: float = EVAL_BUDGET, on_trial: Callable[[], None] | None = None,
-               hil: bool = False) -> dict:
+               hil: bool = False, recorder=None) -> dict:
     """Random placements and start offsets; returns per-trial states and grasp outcomes.
 
     ``on_trial`` is called after each trial (progress reporting from another process);
-    ``hil``: through the real drivers (see the module docstring).
+    ``hil``: through the real drivers (see the module docstring); ``recorder``: records the
+    looks and grasps (``controller.recording.RunRecorder``; its ``max_runs`` picks the first
+    trials).
     """
     rng = np.random.default_rng(seed)
     states, grasps, per_iteration, outcomes = [], [], [], []
+    state_times, grasp_times, splits = [], [], []
     with device_opener(hil)(config, seed=seed) as devices:
         cell = devices.cell
         if cell is None:
             raise FineposError("evaluation needs the simulated cell for its ground truth")
-        fp = FinePositioner(devices, config, log=log, state_dir=work_dir)
+        timed = TimedTruth(devices)
+        fp = FinePositioner(timed, config, log=log, state_dir=work_dir, recorder=recorder)
         fp.use_model(model)
         fp.teach_auto()  # the state file records the part's grasp geometry for the grasp
         x0, y0, _ = cell.object_pose()
         kappa = cell.kappa
         period = 360.0 / kappa
         for _ in tqdm(range(trials), desc=f"evaluate {system}", unit="trial",
-                      disable=not progress, leave=False):
+                      disable=None if progress else True, leave=False):
             devices.arm.open_gripper()
             x = x0 + rng.uniform(-PLACEMENT_MM, PLACEMENT_MM)
             y = y0 + rng.uniform(-PLACEMENT_MM, PLACEMENT_MM)
@@ -114,17 +128,64 @@ def run_trials(system: str, model: TrainedModel, config, trials: int, seed: int,
             dx, dy = rng.uniform(-OFFSET_MM, OFFSET_MM, 2)
             dphi = rng.uniform(-period / 2, period / 2)
             fp.move_to(nominal.moved_in_tool_frame(ToolStep(-dx, -dy, 0.0, -dphi)))
+            timed.times.clear()
+            start_s = devices.clock()
+            split0 = _split(devices.timing)
             result = fp.position(budget)
             states.append(result.states)
+            state_times.append([t - start_s for t in timed.times]
+                               if len(timed.times) == len(result.states) else None)
             outcomes.append(result.outcome)
             per_iteration.extend(result.seconds_per_iteration)
             if grasp:
                 g = fp.grasp()
-                grasps.append(bool(g.success and cell.holding))
+                held = bool(g.success and cell.holding)
+                grasps.append(held)
+                grasp_times.append(devices.clock() - start_s if held else None)
+            if split0 is not None:
+                wire, motion = (b - a for a, b in zip(split0, _split(devices.timing),
+                                                       strict=True))
+                splits.append({"total": devices.clock() - start_s, "wire": wire,
+                               "motion": motion})
             if on_trial is not None:
                 on_trial()
     return {"states": states, "grasps": grasps, "seconds_per_iteration": per_iteration,
-            "outcomes": outcomes, "object": cell_kind(config), "kappa": kappa}
+            "outcomes": outcomes, "object": cell_kind(config), "kappa": kappa,
+            "state_times": state_times, "grasp_times": grasp_times,
+            "timing": config.scene.timing, "time_split": splits}
+
+
+def _split(timing) -> tuple[float, float] | None:
+    """(wire, motion) seconds charged so far on the in-process cell's timing (None: none)."""
+    return None if timing is None else (timing.wire_s, timing.motion_s)
+
+
+class TimedTruth:
+    """The opened devices, with every ground-truth reading's cell time noted in ``times``
+    (``devices.clock()``): the loop reads the truth once per state, so ``times`` lines up with
+    a positioning run's states (time to safe). Everything else is the devices' own."""
+
+    def __init__(self, devices) -> None:
+        self._devices = devices
+        self.times: list[float] = []
+
+    def __getattr__(self, name: str):
+        return getattr(self._devices, name)
+
+    def ground_truth(self):
+        """The devices' ground truth, its cell time noted."""
+        self.times.append(self._devices.clock())
+        return self._devices.ground_truth()
+
+
+def _median_split(splits) -> dict | None:
+    """Per trial (positioning and grasp), the median cell seconds in all, on the serial lines
+    (``wire``), in arm and hand motion (``motion``), and the rest (camera and sensor waits)."""
+    if not splits:
+        return None
+    out = {k: float(np.median([s[k] for s in splits])) for k in ("total", "wire", "motion")}
+    out["other"] = float(np.median([s["total"] - s["wire"] - s["motion"] for s in splits]))
+    return out
 
 
 def device_opener(hil: bool):
@@ -140,12 +201,14 @@ def cell_kind(config) -> str:
 
 def evaluate(system: str, config, *, trials: int, seed: int, lighting: str | None = None,
              model_path: str | Path | None = None, work_dir: str | Path | None = None,
-             grasp: bool = True, log=None, progress: bool = True, hil: bool = False) -> dict:
+             grasp: bool = True, log=None, progress: bool = True, hil: bool = False,
+             recorder=None) -> dict:
     """The ``finepos evaluate`` report (see the README for its fields); ``hil``: through the
-    real drivers and the device emulators (see the module docstring)."""
+    real drivers and the device emulators (see the module docstring); ``recorder``: records
+    the trials' looks (see ``run_trials``)."""
     if system not in SYSTEMS:
         raise FineposError(f"unknown system {system!r} (one of {', '.join(SYSTEMS)})")
-    eval_cfg = with_lighting(config, lighting)
+    eval_cfg = with_test_camera(with_lighting(config, lighting))
     with tempfile.TemporaryDirectory(prefix="finepos-eval-") as tmp:
         work = Path(work_dir or tmp)
         if model_path is not None:
@@ -155,7 +218,7 @@ def evaluate(system: str, config, *, trials: int, seed: int, lighting: str | Non
             model, acquisition = train_on_default_scene(system, config, work / "train", seed,
                                                         progress, hil)
         run = run_trials(system, model, eval_cfg, trials, seed, work_dir=work / "eval",
-                         grasp=grasp, log=log, progress=progress, hil=hil)
+                         grasp=grasp, log=log, progress=progress, hil=hil, recorder=recorder)
     report = build_report(system, config, eval_cfg, trials=trials, seed=seed, model=model,
                           acquisition=acquisition, run=run)
     report["hil"] = hil
@@ -166,7 +229,7 @@ def build_report(system: str, config, eval_cfg, *, trials: int, seed: int,
                  model: TrainedModel, acquisition: dict, run: dict) -> dict:
     """The ``finepos evaluate`` report of one ``run_trials`` result (``config``: the one the
     model was trained from; ``eval_cfg``: the one the trials ran on)."""
-    summary = summarise(run["states"])
+    summary = summarise(run["states"], run.get("state_times"), run.get("grasp_times"))
     report = {
         "system": system,
         "lighting": eval_cfg.scene.lighting.preset,
@@ -175,6 +238,10 @@ def build_report(system: str, config, eval_cfg, *, trials: int, seed: int,
         "seed": seed,
         **summary,
         "grasp_success_rate": (float(np.mean(run["grasps"])) if run["grasps"] else None),
+        "grasp_success_ci": (wilson(sum(run["grasps"]), len(run["grasps"]))
+                             if run["grasps"] else None),
+        "timing": run.get("timing"),
+        "time_split_s": _median_split(run.get("time_split")),
         "train_images": model.train_images,
         "train_seconds": model.train_seconds,
         "acquire_seconds": acquisition["acquire_seconds"],

@@ -26,15 +26,36 @@ TILT_DEG = 36.0  # optical axis from the approach axis towards the tool's +x
 FOCAL_PX = (HEIGHT_PX / 2.0) / math.tan(math.radians(VFOV_DEG) / 2.0)
 
 
-def camera_in_tool() -> np.ndarray:
-    """4x4 pose (mm) of the camera frame in the tool frame (z = approach axis)."""
-    tau = math.radians(TILT_DEG)
+def _rotation(axis: int, angle_deg: float) -> np.ndarray:
+    """Rotation by ``angle_deg`` about coordinate axis ``axis`` (0: x, 1: y, 2: z)."""
+    c, s = math.cos(math.radians(angle_deg)), math.sin(math.radians(angle_deg))
+    i, j = [(1, 2), (2, 0), (0, 1)][axis]
+    r = np.eye(3)
+    r[i, i], r[i, j], r[j, i], r[j, j] = c, -s, s, c
+    return r
+
+
+def camera_in_tool(mount=None) -> np.ndarray:
+    """4x4 pose (mm) of the camera frame in the tool frame (z = approach axis).
+
+    Args:
+        mount: the change from the standard mount (``scene_config.MountConfig``: tilt about
+            the image's x axis, which adds to TILT_DEG; pan about the image's y axis; roll
+            about the optical axis; the lens moved by offset_mm in the tool frame); None or
+            all zeros: the standard mount, exactly.
+    """
+    tilt = TILT_DEG + (mount.tilt_deg if mount is not None else 0.0)
+    tau = math.radians(tilt)
     forward = np.array([math.sin(tau), 0.0, math.cos(tau)])
     down = np.array([-math.cos(tau), 0.0, math.sin(tau)])  # image down: back and towards z
     right = np.cross(down, forward)
     t = np.eye(4)
     t[:3, :3] = np.column_stack([right, down, forward])
     t[:3, 3] = LENS_IN_TOOL_MM
+    if mount is not None:
+        if mount.pan_deg or mount.roll_deg:
+            t[:3, :3] = t[:3, :3] @ _rotation(1, mount.pan_deg) @ _rotation(2, mount.roll_deg)
+        t[:3, 3] += np.asarray(mount.offset_mm, dtype=float)
     return t
 
 
@@ -85,8 +106,10 @@ def depth_mm(depth_buffer: np.ndarray) -> np.ndarray:
     return linear_depth_mm(depth_buffer, NEAR_MM, FAR_MM)
 
 
-def pixel_rays() -> np.ndarray:
-    """(H, W, 3) camera-frame directions through the pixel centres, with unit z."""
-    v, u = np.mgrid[0:HEIGHT_PX, 0:WIDTH_PX] + 0.5
-    return np.dstack([(u - WIDTH_PX / 2.0) / FOCAL_PX, (v - HEIGHT_PX / 2.0) / FOCAL_PX,
-                      np.ones((HEIGHT_PX, WIDTH_PX))])
+def pixel_rays(width_px: int = WIDTH_PX, height_px: int = HEIGHT_PX,
+               focal_px: float = FOCAL_PX) -> np.ndarray:
+    """(H, W, 3) camera-frame directions through the pixel centres, with unit z (default: the
+    standard image; other sizes and focal lengths for the optics' wider renders)."""
+    v, u = np.mgrid[0:height_px, 0:width_px] + 0.5
+    return np.dstack([(u - width_px / 2.0) / focal_px, (v - height_px / 2.0) / focal_px,
+                      np.ones((height_px, width_px))])

@@ -7,12 +7,14 @@ Defaults reproduce the paper's standard conditions: the yellow cube on a grey ta
 
 from __future__ import annotations
 
+import dataclasses
 import math
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Literal
 
 from drivers.core.errors import ConfigError
+from drivers.core.timing import TimingMode
 from drivers.core.typed_config import from_mapping, load_yaml_file
 
 # Keep in step with the parts catalogue, drivers.core.parts.PARTS (a test checks it).
@@ -86,11 +88,102 @@ class OccluderConfig:
     coverage: float = field(default=0.0, metadata={"min": 0.0, "max": 0.9})
 
 
+CameraPreset = Literal["realistic", "ideal"]
+
+
+@dataclass(frozen=True)
+class LensConfig:
+    """The lens (None: the camera preset's value; ``sim_backend.cell.optics`` resolves them).
+
+    fov_deg: vertical field of view of the undistorted (pinhole) image; k1, k2 (radial) and
+    p1, p2 (tangential): distortion coefficients exactly as OpenCV's camera model defines them,
+    on normalised image coordinates; vignetting: the fraction of light lost in the image
+    corners (0: none; falls off with the squared distance from the centre); blur_px: defocus,
+    the standard deviation of a Gaussian blur in pixels.
+    """
+
+    fov_deg: float | None = field(default=None, metadata={"min": 20.0, "max": 100.0})
+    k1: float | None = field(default=None, metadata={"min": -1.0, "max": 1.0})
+    k2: float | None = field(default=None, metadata={"min": -1.0, "max": 1.0})
+    p1: float | None = field(default=None, metadata={"min": -0.05, "max": 0.05})
+    p2: float | None = field(default=None, metadata={"min": -0.05, "max": 0.05})
+    vignetting: float | None = field(default=None, metadata={"min": 0.0, "max": 0.9})
+    blur_px: float | None = field(default=None, metadata={"min": 0.0, "max": 5.0})
+
+
+@dataclass(frozen=True)
+class MountConfig:
+    """How the camera sits on the gripper, as a change from the standard mount (zeros).
+
+    tilt_deg: about the image's x axis (positive: looks further forward, away from the
+    fingers); roll_deg: about the optical axis; pan_deg: about the image's y axis; offset_mm:
+    the lens moved along the tool frame's x, y, z.
+    """
+
+    tilt_deg: float = field(default=0.0, metadata={"min": -30.0, "max": 30.0})
+    roll_deg: float = field(default=0.0, metadata={"min": -30.0, "max": 30.0})
+    pan_deg: float = field(default=0.0, metadata={"min": -30.0, "max": 30.0})
+    offset_mm: tuple[float, float, float] = field(default=(0.0, 0.0, 0.0),
+                                                  metadata={"min": -30.0, "max": 30.0})
+
+
+@dataclass(frozen=True)
+class ExposureConfig:
+    """Exposure and gain (None: the preset's value).
+
+    auto: auto-exposure on (it follows a change of light over a few frames, as real ones do);
+    target_grey: the mean grey level it aims for; speed: the fraction of the (logarithmic)
+    brightness error it corrects per frame (1: at once); gain: the fixed exposure x gain
+    factor when auto is off, the starting one when on; max_gain: the most the gain may reach
+    (the exposure time first grows to 3 times the nominal one, ``optics.MAX_EXPOSURE``; the
+    gain amplifies the noise with the signal).
+    """
+
+    auto: bool | None = None
+    target_grey: float | None = field(default=None, metadata={"min": 10.0, "max": 240.0})
+    speed: float | None = field(default=None, metadata={"min": 0.0, "max": 1.0,
+                                                        "exclusive_min": True})
+    gain: float | None = field(default=None, metadata={"min": 0.05, "max": 32.0})
+    max_gain: float | None = field(default=None, metadata={"min": 1.0, "max": 32.0})
+
+
 @dataclass(frozen=True)
 class CameraConfig:
-    """The hand camera: noise_std is the standard deviation of pixel noise in grey levels."""
+    """The hand camera: its optics and sensor, and how it is mounted (part of the cell).
 
+    preset: ``realistic`` (a small industrial colour camera, see ``optics.REALISTIC``) or
+    ``ideal`` (the distortion-free pinhole camera with only Gaussian noise: with all other
+    values unset, the same image as before these options existed); any value given
+    overrides the preset's. noise_std: read noise, grey levels at unit gain (in
+    ``realistic`` shot noise comes on top); full_well_e: electrons a pixel holds (sets the
+    shot noise; 0: none); gamma: the camera's output gamma (2.2: the renderer's tone curve
+    kept; 1: linear output); bayer: a Bayer colour mosaic demosaiced into RGB; jpeg_quality:
+    JPEG compression quality (0: none). mount: the change from the standard mount the cell
+    is taught and trained with; test_mount: a different mount the cell is tested with
+    (``finepos evaluate``: the camera knocked after training; None: the same).
+    """
+
+    preset: CameraPreset = "realistic"
     noise_std: float = field(default=2.0, metadata={"min": 0.0, "max": 50.0})
+    lens: LensConfig = LensConfig()
+    mount: MountConfig = MountConfig()
+    test_mount: MountConfig | None = None
+    exposure: ExposureConfig = ExposureConfig()
+    bayer: bool | None = None
+    jpeg_quality: int | None = field(default=None, metadata={"min": 0, "max": 100})
+    gamma: float | None = field(default=None, metadata={"min": 1.0, "max": 3.0})
+    full_well_e: float | None = field(default=None, metadata={"min": 0.0, "max": 1e6})
+
+    def __post_init__(self) -> None:
+        from sim_backend.cell.optics import resolve_camera  # the presets live with the optics
+
+        resolve_camera(self)  # a lens that folds the image fails here, at load
+
+    def at_test(self) -> CameraConfig:
+        """The camera the cell is tested with: ``test_mount`` (if set) as its mount."""
+        if self.test_mount is None:
+            return self
+        return dataclasses.replace(self, mount=self.test_mount, test_mount=None)
 
 
 @dataclass(frozen=True)
@@ -102,8 +195,13 @@ class ClutterConfig:
 
 @dataclass(frozen=True)
 class SceneConfig:
-    """Config section ``scene``: everything the simulated cell shows."""
+    """Config section ``scene``: everything the simulated cell shows.
 
+    timing: ``realistic`` (every action takes its modelled time from the root ``timing``
+    section on the cell clock; see ``drivers.core.timing``) or ``ideal`` (instant).
+    """
+
+    timing: TimingMode = "realistic"
     object: ObjectConfig = ObjectConfig()
     table: TableConfig = TableConfig()
     lighting: LightingConfig = LightingConfig()
@@ -118,10 +216,12 @@ class SimArmConfig:
 
     repeatability_mm / repeatability_deg: bound of the random error of every executed pose
     (position, and rotation about a random axis); contact_stiffness_n_per_mm: spring constant
-    of the contact model behind the wrist sensor; max_penetration_mm: a move that would push
-    the gripper deeper than this into the table or a part is refused (the real arm would stall
-    or break something); wrench_noise_n: standard deviation of the sensor's force noise (torque
-    noise is a tenth of it in N*m).
+    of the contact model behind the wrist sensor; max_penetration_mm: a move into the table
+    or a part collides and the arm stalls where the gripper is pushed this deep into it
+    (pressing with stiffness x depth: 40 N by default; the force guards must stop it);
+    wrench_noise_n: standard deviation of the sensor's force noise (torque noise is a tenth
+    of it in N*m); grip_force_n: the force limit of the jaws' closing (each finger; a small
+    pneumatic parallel gripper, a judgement).
     """
 
     repeatability_mm: float = field(default=0.02, metadata={"min": 0.0, "max": 5.0})
@@ -130,6 +230,7 @@ class SimArmConfig:
                                                                      "exclusive_min": True})
     max_penetration_mm: float = field(default=5.0, metadata={"min": 0.0, "exclusive_min": True})
     wrench_noise_n: float = field(default=0.02, metadata={"min": 0.0, "max": 1.0})
+    grip_force_n: float = field(default=10.0, metadata={"min": 0.5, "max": 200.0})
 
 
 def load_scene(path: str | Path) -> SceneConfig:

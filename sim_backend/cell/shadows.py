@@ -72,11 +72,12 @@ class ShadowMap:
 
     def apply(self, rgb: np.ndarray, depth_buffer: np.ndarray, seg: np.ndarray,
               camera_to_world: np.ndarray, light: Light, centre_mm: np.ndarray,
-              hidden_rgba) -> np.ndarray:
+              hidden_rgba, rays: np.ndarray | None = None) -> np.ndarray:
         """``rgb`` (H x W x 3 uint8) with the cast shadows of ``light`` darkened in.
 
         centre_mm: the point on the table the shadow map is centred on; hidden_rgba: the
-        hidden body's colour, restored after the lamp's view is rendered.
+        hidden body's colour, restored after the lamp's view is rendered; rays: (H, W, 3)
+        camera-frame rays of the render's pixels (default: the standard hand-camera image's).
         """
         direction = np.asarray(light.direction)
         lamp = _look_at(centre_mm + direction * LAMP_DISTANCE_MM, centre_mm)
@@ -84,7 +85,8 @@ class ShadowMap:
         # Camera pixels -> points in the lamp's frame, in one affine step.
         lamp_from_cam = np.linalg.inv(lamp) @ camera_to_world
         depth = hand_camera.depth_mm(depth_buffer.reshape(-1))
-        pts = (self._rays * depth[:, None]) @ lamp_from_cam[:3, :3].T.astype(np.float32)
+        rays = self._rays if rays is None else rays.reshape(-1, 3).astype(np.float32)
+        pts = (rays * depth[:, None]) @ lamp_from_cam[:3, :3].T.astype(np.float32)
         pts += lamp_from_cam[:3, 3].astype(np.float32)
         z = pts[:, 2]
         scale = self._focal_px / z

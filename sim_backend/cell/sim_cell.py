@@ -1,9 +1,11 @@
 """SimCell: the whole simulated work cell in one PyBullet client (DIRECT mode).
 
 A grey table, the PUMA 260 with gripper and hand camera (``robot_model``), the part to grasp
-(``objects``), optionally an occluder lying on it and clutter around it, the light. Everything
+(``objects``), optionally an occluder lying on it and clutter around it, the light. The arm
 moves kinematically: arm moves are solved by inverse kinematics and executed by setting the
-joints (exact and fast); contact, wrench and gripping come from ``contact``. The arm reports
+joints (exact and fast); a move into the table or a part stalls against it; the wrench comes
+from the contact model (``contact``). The part is a dynamic body, stepped only while the jaws
+close, the part is lifted or let go (``grasp_physics``). The arm reports
 the pose it was commanded to (as VAL does); the pose it really reaches carries a random
 repeatability error, and the camera and the ground truth see the real one.
 
@@ -22,12 +24,26 @@ import numpy as np
 from drivers.core.errors import MotionRejectedError
 from drivers.core.parts import APPROACH_HEIGHT_MM
 from drivers.core.pose import Pose, rot_z, wrap_deg
-from sim_backend.cell import contact, hand_camera, meshes, puma260, robot_model, textures
+from sim_backend.cell import (
+    contact,
+    grasp_physics,
+    hand_camera,
+    meshes,
+    optics,
+    puma260,
+    robot_model,
+    textures,
+)
 from sim_backend.cell.lighting import Light, resolve_light
 from sim_backend.cell.objects import PARTS, PartSpec
 from sim_backend.cell.pybullet_quiet import p
 from sim_backend.cell.robot_model import FINGER_LINKS, TOOL_LENGTH_MM
-from sim_backend.cell.scene_config import LightingConfig, SceneConfig, SimArmConfig
+from sim_backend.cell.scene_config import (
+    LightingConfig,
+    MountConfig,
+    SceneConfig,
+    SimArmConfig,
+)
 from sim_backend.cell.shadows import ShadowMap
 
 logger = logging.getLogger(__name__)
@@ -77,6 +93,24 @@ def tool_down_rotation(heading_deg: float) -> np.ndarray:
     return rot_z(math.radians(heading_deg)) @ np.diag([1.0, -1.0, -1.0])
 
 
+def _interpolate(a: np.ndarray, b: np.ndarray, s: float) -> np.ndarray:
+    """The 4x4 pose (mm) a fraction ``s`` of the way from ``a`` to ``b`` (straight line, the
+    rotation about its fixed axis)."""
+    rel = a[:3, :3].T @ b[:3, :3]
+    angle = math.acos(float(np.clip((np.trace(rel) - 1.0) / 2.0, -1.0, 1.0)))
+    out = np.eye(4)
+    out[:3, 3] = a[:3, 3] + s * (b[:3, 3] - a[:3, 3])
+    if angle < 1e-9:
+        out[:3, :3] = a[:3, :3]
+        return out
+    axis = np.array([rel[2, 1] - rel[1, 2], rel[0, 2] - rel[2, 0], rel[1, 0] - rel[0, 1]])
+    axis /= max(np.linalg.norm(axis), 1e-12)
+    k = np.array([[0.0, -axis[2], axis[1]], [axis[2], 0.0, -axis[0]], [-axis[1], axis[0], 0.0]])
+    t = s * angle
+    out[:3, :3] = a[:3, :3] @ (np.eye(3) + math.sin(t) * k + (1.0 - math.cos(t)) * (k @ k))
+    return out
+
+
 def _pose_to_pb(t_mm: np.ndarray) -> tuple[list[float], list[float]]:
     """PyBullet position (m) and quaternion of a 4x4 pose in mm."""
     return (t_mm[:3, 3] / 1000.0).tolist(), robot_model.quaternion(t_mm[:3, :3])
@@ -116,6 +150,10 @@ class SimCell:
         self._wrench_rng = np.random.default_rng(wrench)
         self.part: PartSpec = PARTS[scene.object.kind]
         self.light: Light = resolve_light(scene.lighting)
+        self.camera_model = optics.resolve_camera(scene.camera)
+        self._optics = (None if self.camera_model.ideal
+                        else optics.CameraPipeline(self.camera_model, self._noise_rng))
+        self._mount = scene.camera.mount
         self._textures = textures.TextureFiles()
         self._client = p.connect(p.DIRECT)
         self._closed = False
@@ -155,9 +193,19 @@ class SimCell:
                                       physicsClientId=cid)
         self._table_id, self._table_rgba = self._build_table()
         self._robot = robot_model.build_robot(cid, palette)
+        self._jaws = grasp_physics.setup(cid, self._robot.body_id, self._table_id,
+                                         self.part.friction)
         color = self.scene.object.color
         self._part = _Item(self._part_body(self.part, color), np.eye(4), LABEL_PART)
+        # The part is a dynamic body: it moves by itself only while a grasp steps the physics.
+        grasp_physics.make_dynamic(cid, self._part.body_id, self.part.mass_g / 1000.0,
+                                   self.part.friction)
         self._occluder = self._build_occluder() if self.scene.occluder.enabled else None
+        if self._occluder is not None:  # the card lies on the part: it goes where the part goes
+            for link in (-1, *FINGER_LINKS):
+                body = self._robot.body_id if link >= 0 else self._part.body_id
+                p.setCollisionFilterPair(body, self._occluder.body_id, link, -1, 0,
+                                         physicsClientId=cid)
         self._occluder_in_part = np.eye(4)
         self._clutter = [_Item(self._part_body(PARTS[kind], color), pose, LABEL_CLUTTER)
                          for kind, color, pose in self._clutter_layout(self.scene.clutter.count)]
@@ -165,7 +213,9 @@ class SimCell:
         for item in self._items():
             self._labels[item.body_id] = item.label
         self._shadow_map = ShadowMap(cid, self._table_id)
-        self._held: np.ndarray | None = None
+        self._held: np.ndarray | None = None  # the part in the tool frame while held
+        self._gripping = False  # jaws closed on the part, its hold not yet tested by a lift
+        self._motion_dir: np.ndarray | None = None  # of the tool's last move (contact drag)
         self._finger_offset_mm = self.part.jaw_opening_mm / 2.0
         self._contacts: list[contact.Contact] | None = None
         obj = self.scene.object
@@ -300,8 +350,8 @@ class SimCell:
 
     @property
     def holding(self) -> bool:
-        """Whether the jaws hold the part."""
-        return self._held is not None
+        """Whether the jaws hold the part: closed on it, and once lifted, carrying it."""
+        return self._held is not None or self._gripping
 
     def place_object(self, x_mm: float, y_mm: float, phi_deg: float) -> None:
         """Put the part on the table at (x, y) turned by phi about the vertical (releasing it if
@@ -318,6 +368,7 @@ class SimCell:
             raise ValueError(f"the pre-grasp pose over a part at ({x_mm:g}, {y_mm:g}) mm is "
                              f"out of the arm's reach: {exc.reason}") from exc
         self._held = None
+        self._gripping = False
         # Occluder and clutter are laid out in the nominal grasp frame (x along the tool's
         # heading), so the gripper's footprint is known in it.
         frame = nominal.copy()
@@ -346,6 +397,7 @@ class SimCell:
     def _place_body(self, body: int, pose_mm: np.ndarray) -> None:
         pos, orn = _pose_to_pb(pose_mm)
         p.resetBasePositionAndOrientation(body, pos, orn, physicsClientId=self._client)
+        grasp_physics.stop(self._client, body)
 
     @staticmethod
     def _heading_of(pose: np.ndarray) -> float:
@@ -407,9 +459,15 @@ class SimCell:
     def move_arm(self, target: Pose) -> Pose:
         """Move the tool to ``target`` (atomic); returns the reported pose reached.
 
+        A move into the table or a part collides as a real arm would: the arm stops where the
+        gripper (or a held part) is pushed ``max_penetration_mm`` into it, the wrist sensor
+        feeling the contact force (``contact_stiffness_n_per_mm`` times that depth); nothing
+        refuses it, the force guards must stop it. The first move after the jaws closed on
+        the part is its lift: the part is held only if friction holds it
+        (``grasp_physics.hold_test``), else it stays on the table.
+
         Raises MotionRejectedError, with nothing moved, when the target is out of reach or
-        outside the joint limits, or would push the gripper (or a held part) more than
-        ``max_penetration_mm`` into the table or a part.
+        outside the joint limits.
         """
         if not target.is_finite():
             raise MotionRejectedError(f"target pose is not finite: {target}")
@@ -424,18 +482,48 @@ class SimCell:
             q_true = puma260.inverse_kinematics(tool_true @ FLANGE_IN_TOOL, q_cmd)
         except MotionRejectedError:  # at the very edge of reach: no error this time
             tool_true, q_true = tool_cmd, q_cmd
+        if self._gripping:
+            self._lift_test()
         previous = (self._q_true, self._tool_true)
+        travel = tool_true[:3, 3] - self._tool_true[:3, 3]
+        if np.linalg.norm(travel) > 1e-6:
+            self._motion_dir = travel / np.linalg.norm(travel)
         self._set_arm(q_true, tool_true)
-        deepest = max(self._touching(), key=lambda c: c.depth_mm, default=None)
-        if deepest is not None and deepest.depth_mm > self.arm_config.max_penetration_mm:
-            self._set_arm(*previous)
-            what = {self._table_id: "the table"}.get(deepest.body_b, "a part")
-            reason = (f"collision: the move would push the gripper {deepest.depth_mm:.1f} mm "
-                      f"into {what} (limit {self.arm_config.max_penetration_mm:g} mm)")
-            logger.warning("motion rejected: %s", reason)
-            raise MotionRejectedError(reason)
+        limit = self.arm_config.max_penetration_mm
+        if self._deepest_mm() > limit:
+            q_cmd, tool_cmd = self._stall(*previous, tool_true)
         self._q_cmd, self._tool_cmd = q_cmd, tool_cmd
         return self.arm_pose()
+
+    def _deepest_mm(self) -> float:
+        return max((c.depth_mm for c in self._touching()), default=0.0)
+
+    def _stall(self, q_from: np.ndarray, tool_from: np.ndarray,
+               tool_to: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """The arm ran into something on its way from ``tool_from`` to ``tool_to``: put it
+        where the deepest contact reaches ``max_penetration_mm`` (the servos stall there) and
+        return that pose as the one reached (joints, tool)."""
+        limit = self.arm_config.max_penetration_mm
+        lo, hi = 0.0, 1.0
+        q_lo, tool_lo = q_from, tool_from
+        for _ in range(14):
+            mid = (lo + hi) / 2.0
+            tool = _interpolate(tool_from, tool_to, mid)
+            try:
+                q = puma260.inverse_kinematics(tool @ FLANGE_IN_TOOL, q_lo)
+            except MotionRejectedError:
+                hi = mid
+                continue
+            self._set_arm(q, tool)
+            if self._deepest_mm() > limit:
+                hi = mid
+            else:
+                lo, q_lo, tool_lo = mid, q, tool
+        self._set_arm(q_lo, tool_lo)
+        force = self.arm_config.contact_stiffness_n_per_mm * self._deepest_mm()
+        logger.warning("collision: the arm ran into an obstacle and stalled after %.0f%% of "
+                       "the move, pressing with about %.0f N", 100.0 * lo, force)
+        return q_lo, tool_lo
 
     def _set_arm(self, q_true: np.ndarray, tool_true: np.ndarray) -> None:
         self._q_true, self._tool_true = q_true, tool_true
@@ -449,38 +537,84 @@ class SimCell:
         return 2.0 * self._finger_offset_mm
 
     def open_gripper(self) -> float:
-        """Open the jaws fully, letting go of a held part (it comes to rest on the table)."""
-        if self._held is not None:
-            self._held = None
-            x, y, phi = self.object_pose()
-            rest = _translation(x, y, 0.0)
-            rest[:3, :3] = rot_z(math.radians(phi))
-            self._set_part_pose(rest)
+        """Open the jaws to the part's jaw opening, letting go of a held part (it falls and
+        comes to rest as physics has it)."""
+        released = self._held is not None or self._gripping
+        self._held, self._gripping = None, False
         self._set_fingers(self.part.jaw_opening_mm / 2.0)
+        if released:
+            grasp_physics.stop(self._client, self._part.body_id)
+            grasp_physics.settle(self._jaws, self._q_true, self._part.body_id,
+                                 self._finger_offset_mm)
+            self._sync_part()
         return self.finger_width_mm()
 
     def close_gripper(self) -> float:
-        """Close the jaws until they grip the part or meet; returns the finger width (mm)."""
-        if self._held is not None:
+        """Close the jaws under position and force control (``grip_force_n``) until they stop
+        on the part or meet; returns the finger width (mm). A finger closing off-centre
+        pushes, turns or tilts the part (``grasp_physics.close_jaws``)."""
+        if self._held is not None or self._gripping:
             return self.finger_width_mm()
-        jaw_axis = self._tool_true[:3, 1]
-        result = contact.close_on(
-            self._client, self._robot.body_id, FINGER_LINKS, self._part.body_id, jaw_axis,
-            self._finger_offset_mm, self._set_fingers, self._push_part)
-        self._set_fingers(result.offset_mm)
-        if result.gripping:
-            self._held = np.linalg.inv(self._tool_true) @ self._part_pose
+        grasp_physics.stop(self._client, self._part.body_id)
+        offset = grasp_physics.close_jaws(self._jaws, self._q_true, self.arm_config.grip_force_n)
+        self._sync_part()
+        self._set_fingers(max(offset, 0.0))
+        self._gripping = all(grasp_physics.touching_fingers(self._jaws, self._part.body_id))
         return self.finger_width_mm()
+
+    def _lift_test(self) -> None:
+        """The lift begins: the part is held if friction holds it against its weight with the
+        table's support gone; otherwise it stays behind on the table."""
+        self._gripping = False
+        before = self._part_pose.copy()
+        supports = [self._table_id, *(item.body_id for item in self._clutter)]
+        held = grasp_physics.hold_test(self._jaws, self._q_true, self._part.body_id, supports,
+                                       self.arm_config.grip_force_n)
+        if held:
+            self._sync_part()
+            self._held = np.linalg.inv(self._tool_true) @ self._part_pose
+        else:
+            logger.info("grasp: the part slid out of the jaws as they lifted")
+            self._set_part_pose(before)
+            grasp_physics.settle(self._jaws, self._q_true, self._part.body_id,
+                                 self._finger_offset_mm, max_s=0.3)
+            self._sync_part()
+        self._set_fingers(self._finger_offset_mm)
+
+    def _sync_part(self) -> None:
+        """Take the part's pose from the physics (after the cell stepped it)."""
+        pos, orn = p.getBasePositionAndOrientation(self._part.body_id,
+                                                   physicsClientId=self._client)
+        pose = np.eye(4)
+        pose[:3, :3] = np.reshape(p.getMatrixFromQuaternion(orn), (3, 3))
+        pose[:3, 3] = np.asarray(pos) * 1000.0
+        self._set_part_pose(pose)
+
+    def grasp_misalignment(self) -> dict[str, float] | None:
+        """How the held part sits in the jaws, against sitting squarely centred between them
+        (None when nothing is held): across_mm (along the jaw axis, tool y), along_mm (along
+        the jaws, tool x), height_mm (along the approach axis, against the taught grip
+        depth), phi_deg (turn about the approach axis, wrapped by the part's symmetry) and
+        tilt_deg (of the part's vertical against the approach axis)."""
+        if self._held is None:
+            return None
+        part_in_tool = self._held
+        nominal = tool_down_rotation(0.0)  # the part's frame in the tool frame when square
+        rel = nominal.T @ part_in_tool[:3, :3]
+        grip_z = self.part.height_mm - self.part.grip_below_top_mm  # part origin, tool z
+        return {
+            "across_mm": float(part_in_tool[1, 3]),
+            "along_mm": float(part_in_tool[0, 3]),
+            "height_mm": float(part_in_tool[2, 3] - grip_z),
+            "phi_deg": wrap_deg(math.degrees(math.atan2(rel[1, 0], rel[0, 0])),
+                                360.0 / self.part.kappa),
+            "tilt_deg": math.degrees(math.acos(float(np.clip(rel[2, 2], -1.0, 1.0)))),
+        }
 
     def _set_fingers(self, offset_mm: float) -> None:
         self._finger_offset_mm = offset_mm
         self._robot.set_fingers(offset_mm)
         self._contacts = None
-
-    def _push_part(self, delta_mm: np.ndarray) -> None:
-        pose = self._part_pose.copy()
-        pose[:2, 3] += delta_mm[:2]
-        self._set_part_pose(pose)
 
     # -- contact and the wrist sensor -----------------------------------------------------------
     def _environment(self, exclude: int | None = None) -> list[int]:
@@ -514,7 +648,8 @@ class SimCell:
                           self._part_pose[:3, 3] + [0.0, 0.0, self.part.height_mm / 2.0]))
         sensor = (t @ [*SENSOR_IN_TOOL_MM, 1.0])[:3]
         w = contact.wrench_in_tool(self._touching(), self.arm_config.contact_stiffness_n_per_mm,
-                                   sensor, t[:3, :3], loads)
+                                   sensor, t[:3, :3], loads, self._motion_dir,
+                                   grasp_physics.FINGER_PAD_FRICTION)
         if noisy and self.arm_config.wrench_noise_n > 0:
             sigma = self.arm_config.wrench_noise_n
             w = w + self._wrench_rng.normal(0.0, 1.0, 6) * np.array([sigma] * 3 + [sigma / 10] * 3)
@@ -527,33 +662,53 @@ class SimCell:
         self.light = resolve_light(config)
         return self.light
 
+    @property
+    def camera_mount(self) -> MountConfig:
+        """How the hand camera sits on the gripper (the change from the standard mount)."""
+        return self._mount
+
+    def set_camera_mount(self, mount: MountConfig) -> None:
+        """Move the hand camera on the gripper (a knock; ``scene.camera.mount`` at start)."""
+        self._mount = mount
+
     def camera_to_world(self) -> np.ndarray:
         """4x4 pose (mm) of the hand camera (x right, y down, z forward)."""
-        return self._tool_true @ hand_camera.camera_in_tool()
+        return self._tool_true @ hand_camera.camera_in_tool(self._mount)
 
     def _render_raw(self) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """The pinhole render: the delivered image's size, or the wider one the lens's
+        distortion is resampled from (``optics.LensGeometry``)."""
         light = self.light
+        if self._optics is None:
+            width, height = hand_camera.WIDTH_PX, hand_camera.HEIGHT_PX
+            projection = hand_camera.projection_matrix()
+        else:
+            geometry = self._optics.geometry
+            width, height = geometry.width_px, geometry.height_px
+            projection = geometry.projection_matrix()
         _, _, rgba, depth, seg = p.getCameraImage(
-            hand_camera.WIDTH_PX, hand_camera.HEIGHT_PX,
-            hand_camera.view_matrix(self.camera_to_world()), hand_camera.projection_matrix(),
+            width, height, hand_camera.view_matrix(self.camera_to_world()), projection,
             lightDirection=list(light.direction), lightColor=list(light.color),
             lightAmbientCoeff=light.ambient, lightDiffuseCoeff=light.diffuse,
             lightSpecularCoeff=light.specular, shadow=0, renderer=p.ER_TINY_RENDERER,
             physicsClientId=self._client)
-        shape = (hand_camera.HEIGHT_PX, hand_camera.WIDTH_PX)
+        shape = (height, width)
         rgb = np.reshape(np.asarray(rgba, dtype=np.uint8), (*shape, 4))[:, :, :3]
         return (rgb, np.reshape(np.asarray(depth, dtype=np.float32), shape),
                 np.reshape(np.asarray(seg, dtype=np.int32), shape))
 
     def render(self, noisy: bool = True) -> np.ndarray:
-        """What the hand camera sees: HxWx3 uint8 RGB (192x144), with cast shadows and, when
-        ``noisy``, the configured camera noise."""
+        """What the hand camera sees: HxWx3 uint8 RGB (192x144), with cast shadows, through
+        the configured optics and sensor (``optics``) and, when ``noisy``, with its noise."""
         rgb, depth, seg = self._render_raw()
         if self.light.casts_shadows:
             cam = self.camera_to_world()
             centre = self._shadow_centre(cam)
+            rays = None if self._optics is None else self._optics.geometry.pixel_rays()
             rgb = self._shadow_map.apply(rgb, depth, seg, cam, self.light, centre,
-                                         self._table_rgba)
+                                         self._table_rgba, rays)
+        if self._optics is not None:
+            return self._optics.process(rgb, noisy)
         std = self.scene.camera.noise_std
         if noisy and std > 0:
             noise = self._noise_rng.standard_normal(rgb.shape, dtype=np.float32) * std
@@ -572,6 +727,8 @@ class SimCell:
         """HxW int labels of what each camera pixel shows: LABEL_BACKGROUND (table, nothing),
         LABEL_PART, LABEL_ROBOT, LABEL_OCCLUDER, LABEL_CLUTTER."""
         _, _, seg = self._render_raw()
+        if self._optics is not None:
+            seg = self._optics.geometry.resample(seg, nearest=True)
         out = np.full(seg.shape, LABEL_BACKGROUND, dtype=np.int32)
         for body, label in self._labels.items():
             out[seg == body] = label

@@ -1,0 +1,96 @@
+"""Self-check: has the camera or the part changed since teach-in?
+
+Example: finepos check --config deploy/finepos.yaml --part cube
+
+Move to the taught pose and look (the part where it was taught, e.g. a reference part in its
+fixture): the trained model must read a near-zero correction (at most --max-mm and --max-deg)
+and the view must match the acquisition's image at that pose (similarity at least
+--min-similarity; defaults at the end of --help). Prints what it measured (JSON). Exit status 1
+when the check fires: the camera (knocked, another lens) or the part has changed and the cell
+needs a new teach-in (teach, acquire, train) before it positions again; 2 when nothing is
+taught or trained yet.
+"""
+
+from __future__ import annotations
+
+import argparse
+import dataclasses
+
+from controller.commands.common import add_config_option, config_from_args
+from controller.devices import open_devices
+from controller.fine_positioner import FinePositioner
+from controller.systems.registry import SYSTEMS
+from controller.teach.self_check import (
+    MAX_CORRECTION_DEG,
+    MAX_CORRECTION_MM,
+    MIN_SIMILARITY,
+    CheckLimits,
+    self_check,
+)
+from drivers.core import parts
+from drivers.core.files import write_json
+
+
+def _positive_float(text: str) -> float:
+    try:
+        value = float(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"expected a number, got {text!r}") from None
+    if not (0.0 < value < 1e6):
+        raise argparse.ArgumentTypeError(f"must be a finite number > 0, got {text}")
+    return value
+
+
+def _with_part(config, kind: str):
+    """The config with ``controller.part`` (and the simulated table's part) set to ``kind``."""
+    parts.part(kind)  # ConfigError naming the allowed parts
+    scene = config.scene
+    obj = dataclasses.replace(scene.object, kind=kind)
+    return dataclasses.replace(
+        config, controller=dataclasses.replace(config.controller, part=kind),
+        scene=dataclasses.replace(scene, object=obj))
+
+
+def run(args) -> int:
+    """Run the self-check, print what it measured (JSON); 1 when it fires."""
+    config = config_from_args(args)
+    if args.part is not None:
+        config = _with_part(config, args.part)
+    limits = CheckLimits(args.max_mm, args.max_deg, args.min_similarity)
+    with open_devices(config, seed=args.seed) as devices:
+        fp = FinePositioner(devices, config, state_dir=args.state_dir)
+        state = fp.state()
+        expected = args.part or (devices.cell.object_kind if devices.cell is not None
+                                 else config.controller.part)
+        result = self_check(fp, args.system, limits)
+        if state.object_kind != expected:
+            result.reasons.insert(0, f"the cell was taught on the {state.object_kind}, not the "
+                                     f"{expected}")
+            result.fired = True
+            result.message = ("the part has changed since teach-in: " + "; ".join(result.reasons)
+                              + ". The cell needs a new teach-in (teach, acquire, train).")
+    report = {"check": "fired" if result.fired else "passed", "system": args.system,
+              "state_dir": str(fp.state_dir), **result.as_dict()}
+    write_json(args.json, report)
+    return 1 if result.fired else 0
+
+
+def add_arguments(parser: argparse.ArgumentParser) -> None:
+    """The options of ``finepos check``."""
+    parser.epilog = (f"Defaults: --max-mm {MAX_CORRECTION_MM:g}, --max-deg "
+                     f"{MAX_CORRECTION_DEG:g}, --min-similarity {MIN_SIMILARITY:g}.")
+    add_config_option(parser)
+    parser.add_argument("--part", metavar="NAME", choices=sorted(parts.PARTS),
+                        help="the part the cell should be set up for (default: controller.part, or "
+                             "the simulated table's); taught on another part fires the check")
+    parser.add_argument("--system", default="gabor", choices=sorted(SYSTEMS))
+    parser.add_argument("--max-mm", type=_positive_float, default=MAX_CORRECTION_MM,
+                        help="largest correction (mm) the model may read at the taught pose")
+    parser.add_argument("--max-deg", type=_positive_float, default=MAX_CORRECTION_DEG,
+                        help="largest rotation (deg) the model may read at the taught pose")
+    parser.add_argument("--min-similarity", type=_positive_float, default=MIN_SIMILARITY,
+                        help="least similarity (0..1) to the acquisition's image at the "
+                             "taught pose")
+    parser.add_argument("--seed", type=int, default=0,
+                        help="simulated cell only: seeds its noise and repeatability (a restart)")
+    parser.add_argument("--json", metavar="OUT", help="also write the report here")
