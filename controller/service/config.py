@@ -70,7 +70,10 @@ class ServiceConfig:
     record_dir: record every positioning job as ``<job>.mcap`` in this folder
     (``controller.recording``; None: no recordings);
     live_view_port: serve the annotated hand-camera image as MJPEG on 127.0.0.1 at this port
-    (``controller.recording.live``; None: off).
+    (``controller.recording.live``; None: off);
+    self_check_at_start: at start, move to the taught pose and run the self-check
+    (``finepos check``); when it fires the service starts in fault (code ``self_check``) and
+    refuses motion until a reset (off by default: it moves the arm at start).
     """
 
     socket_path: str = "/run/finepos/finepos.sock"
@@ -94,6 +97,7 @@ class ServiceConfig:
     tcp: TcpConfig | None = None
     record_dir: str | None = None
     live_view_port: int | None = field(default=None, metadata={"min": 1, "max": 65535})
+    self_check_at_start: bool = False
 
     def __post_init__(self) -> None:
         if not self.socket_path.strip():

@@ -133,6 +133,7 @@ class Service:
             stack.callback(self._stop_job)
             self._fp = FinePositioner(None, cfg, log=self._log)
             self._open_devices()
+            self._start_up_check()
             self.serving.set()
             state, _, reason = self._machine.snapshot()
             self._notifier.ready(f"{state.value}: {reason}")
@@ -173,6 +174,30 @@ class Service:
         with self._machine.lock:
             self._attach_devices()
             self._machine.transition(State.IDLE, "devices open")
+
+    def _start_up_check(self) -> None:
+        """``service.self_check_at_start``: look at the taught pose (the arm moves there) and
+        go to fault when the camera or the part has changed since teach-in, instead of
+        positioning on a wrong mapping. Skipped, with a log line, when nothing is taught or
+        trained yet or the devices did not open."""
+        if not self.config.service.self_check_at_start:
+            return
+        with self._machine.lock:
+            fp = self._fp if self._machine.state is State.IDLE else None
+        if fp is None or fp.devices is None:
+            return
+        from controller.teach.self_check import run_self_check
+
+        try:
+            with self._device_lock:
+                result = run_self_check(fp, DEFAULT_SYSTEM)
+        except (FineposError, OSError) as exc:
+            logger.warning("start-up self-check skipped: %s", exc)
+            return
+        logger.info("start-up self-check: %s", result.message)
+        if result.fired:
+            with self._machine.lock:
+                self._enter_fault(f"self-check at start: {result.message}", "self_check")
 
     def _attach_devices(self) -> None:
         """Give the positioner the opened devices and load the model found in the state folder."""
@@ -241,6 +266,8 @@ class Service:
             if self._fault is not None and self._fault.get("code") == "disk_full":
                 self._resume_if_space(now_s)
                 return
+            if self._fault is not None and self._fault.get("code") == "self_check":
+                return  # the devices are fine: the cell needs a new teach-in (after a reset)
             if self._reconnected:
                 return
         with self._device_lock:
@@ -276,9 +303,10 @@ class Service:
     def _enter_fault(self, reason: str, code: str = "device") -> None:
         """Go to (or stay in) fault for ``reason``; call with the state lock held.
 
-        ``code``: ``device`` (a reset reconnects the devices) or ``disk_full`` (the iteration
+        ``code``: ``device`` (a reset reconnects the devices), ``disk_full`` (the iteration
         log, a dataset or a model did not fit; the service goes idle by itself once the log and
-        state folders have room again).
+        state folders have room again) or ``self_check`` (the start-up self-check fired: the
+        cell needs a new teach-in; a reset lets the operator start it).
         """
         self._fault = {"code": code, "reason": reason, "since": time.time()}
         cfg = self.config.service

@@ -1,0 +1,52 @@
+"""``service.self_check_at_start``: the service looks at the taught pose when it starts and
+refuses motion (fault ``self_check``) when the camera no longer sees what it was taught."""
+
+from __future__ import annotations
+
+import shutil
+
+import numpy as np
+import pytest
+
+from calibration_free.synthetic import SyntheticCell, render
+from calibration_free.training import train_bundle
+from controller.service.client import ServiceError
+from controller.teach.cell_state import CellState
+from tests.mocks.fakes import FakeArm, FakeCamera, FakeWrenchSensor
+from tests.synthetic_scene import KAPPA, cell, grids  # noqa: F401  (fixtures)
+
+from .conftest import client_for, device_opener, running_service, service_config
+from .test_faults import NOMINAL
+
+
+@pytest.fixture(scope="module")
+def taught(grids, tmp_path_factory):  # noqa: F811  (the fixture imported above)
+    """A state folder: the synthetic cube taught at NOMINAL and a fully trained model."""
+    folder = tmp_path_factory.mktemp("taught")
+    nn1, nn2 = grids
+    train_bundle(nn1, nn2, object_kind="cube", kappa=KAPPA, nominal_pose=NOMINAL.as_dict(),
+                 nn1_extra=nn2, seed=0).save(folder / "model-gabor.fpm")
+    CellState(NOMINAL, "cube", KAPPA, 5.0, 30.0, "test", 0.0).save(folder / "cell.json")
+    return folder
+
+
+@pytest.mark.parametrize("knock_mm, state", [(0.0, "idle"), (4.0, "fault")])
+def test_start_up_check(tmp_path, short_dir, taught, knock_mm, state):
+    config = service_config(tmp_path, short_dir, service={"self_check_at_start": True})
+    shutil.copytree(taught, config.controller.paths.state_dir)
+    arm, scene = FakeArm(), SyntheticCell()
+
+    def view() -> np.ndarray:  # a knocked camera sees the part shifted at the taught pose
+        step = arm._pose.tool_step_to(NOMINAL)
+        return render(scene, np.array([step.dx_mm + knock_mm, step.dy_mm, step.dphi_deg]))
+
+    with running_service(config, device_opener(arm, FakeCamera(view), FakeWrenchSensor())) \
+            as service, client_for(service) as client:
+        status = client.call("status")
+        assert status["state"] == state, status
+        assert arm._pose.tool_step_to(NOMINAL).translation_mm < 1e-6  # it looked from there
+        if state == "fault":
+            assert status["fault"]["code"] == "self_check"
+            assert "new teach-in" in status["fault"]["reason"]
+            with pytest.raises(ServiceError, match="motion is refused until a reset"):
+                client.call("position", wait=True)
