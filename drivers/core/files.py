@@ -107,13 +107,13 @@ def atomic_write_bytes(path: str | Path, data: bytes) -> None:
     path = Path(path)
     path.parent.mkdir(parents=True, exist_ok=True)
     # SIGTERM/SIGINT wait until the temporary file is known to the cleanup below (their Python
-    # handlers raise; between mkstemp and the try they would leave the file behind).
+    # handlers raise; between mkstemp and the try they would leave the file behind): they are
+    # unblocked only inside the try, where a handler that raises finds ``tmp`` set.
+    tmp = None
     blocked = signal.pthread_sigmask(signal.SIG_BLOCK, _DEFERRED)
     try:
         fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", suffix=".tmp", dir=path.parent)
-    finally:
         signal.pthread_sigmask(signal.SIG_SETMASK, blocked)
-    try:
         fcntl.flock(fd, fcntl.LOCK_EX)  # tells remove_stale_temp_files it is being written
         with os.fdopen(fd, "wb") as f:
             f.write(data)
@@ -121,10 +121,12 @@ def atomic_write_bytes(path: str | Path, data: bytes) -> None:
             os.fsync(f.fileno())
         os.replace(tmp, path)
     except BaseException:
-        try:
-            os.unlink(tmp)
-        except FileNotFoundError:
-            pass
+        signal.pthread_sigmask(signal.SIG_SETMASK, blocked)  # when mkstemp itself failed
+        if tmp is not None:
+            try:
+                os.unlink(tmp)
+            except FileNotFoundError:
+                pass
         raise
     try:
         dir_fd = os.open(path.parent, os.O_RDONLY)
