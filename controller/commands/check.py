@@ -16,7 +16,7 @@ from __future__ import annotations
 import argparse
 import dataclasses
 
-from controller.commands.common import add_config_option, config_from_args
+from controller.commands.common import add_config_option, config_from_args, positive_float
 from controller.devices import open_devices
 from controller.fine_positioner import FinePositioner
 from controller.systems.registry import SYSTEMS
@@ -29,16 +29,6 @@ from controller.teach.self_check import (
 )
 from drivers.core import parts
 from drivers.core.files import write_json
-
-
-def _positive_float(text: str) -> float:
-    try:
-        value = float(text)
-    except ValueError:
-        raise argparse.ArgumentTypeError(f"expected a number, got {text!r}") from None
-    if not (0.0 < value < 1e6):
-        raise argparse.ArgumentTypeError(f"must be a finite number > 0, got {text}")
-    return value
 
 
 def _with_part(config, kind: str):
@@ -84,11 +74,11 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                         help="the part the cell should be set up for (default: controller.part, or "
                              "the simulated table's); taught on another part fires the check")
     parser.add_argument("--system", default="gabor", choices=sorted(SYSTEMS))
-    parser.add_argument("--max-mm", type=_positive_float, default=MAX_CORRECTION_MM,
+    parser.add_argument("--max-mm", type=positive_float, default=MAX_CORRECTION_MM,
                         help="largest correction (mm) the model may read at the taught pose")
-    parser.add_argument("--max-deg", type=_positive_float, default=MAX_CORRECTION_DEG,
+    parser.add_argument("--max-deg", type=positive_float, default=MAX_CORRECTION_DEG,
                         help="largest rotation (deg) the model may read at the taught pose")
-    parser.add_argument("--min-similarity", type=_positive_float, default=MIN_SIMILARITY,
+    parser.add_argument("--min-similarity", type=positive_float, default=MIN_SIMILARITY,
                         help="least similarity (0..1) to the acquisition's image at the "
                              "taught pose")
     parser.add_argument("--seed", type=int, default=0,

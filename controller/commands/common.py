@@ -14,6 +14,17 @@ from controller.recording.writer import RunRecorder
 from drivers.core.errors import ConfigError
 
 
+def positive_float(text: str) -> float:
+    """argparse type: a finite number > 0 and below 1e6 (limits, frame rates)."""
+    try:
+        value = float(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"expected a number > 0, got {text!r}") from None
+    if not (0.0 < value < 1e6):
+        raise argparse.ArgumentTypeError(f"must be a finite number > 0, got {text}")
+    return value
+
+
 def positive_int(text: str) -> int:
     """argparse type: a whole number >= 1 (counts of trials, repeats, workers)."""
     try:

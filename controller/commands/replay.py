@@ -13,20 +13,10 @@ from __future__ import annotations
 
 import argparse
 
+from controller.commands.common import positive_float
 from controller.recording.replay import read_looks, write_sheet, write_video
 from drivers.core.errors import ConfigError
 from drivers.core.files import write_json
-
-
-def positive_float(text: str) -> float:
-    """argparse type: a finite number > 0 (frame rates)."""
-    try:
-        value = float(text)
-    except ValueError:
-        raise argparse.ArgumentTypeError(f"expected a number > 0, got {text!r}") from None
-    if not (0.0 < value < 1e4):
-        raise argparse.ArgumentTypeError(f"must be a number > 0, got {text}")
-    return value
 
 
 def run(args) -> int:

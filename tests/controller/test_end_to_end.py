@@ -16,21 +16,6 @@ from drivers.core.pose import ToolStep
 pytestmark = pytest.mark.slow
 
 
-@pytest.fixture(scope="module")
-def trained(tmp_path_factory):
-    """A cell state and a Gabor model taught and trained on the default simulated scene."""
-    state = tmp_path_factory.mktemp("state")
-    cfg = load_config(None)
-    with open_devices(cfg) as devices:
-        fp = FinePositioner(devices, cfg, state_dir=state)
-        fp.teach_auto()
-        fp.acquire("nn1", progress=False)
-        fp.acquire("nn2", progress=False)
-        model = fp.train()
-    assert model.train_images == 126
-    return state
-
-
 @pytest.mark.parametrize("offset", [ToolStep(18.0, -12.0, 0.0, 30.0), ToolStep(-3.0, 2.0, 0.0,
                                                                                -40.0)])
 def test_converges_to_a_safe_grasp_within_a_small_budget(trained, tmp_path, offset):

@@ -76,20 +76,6 @@ def test_replay_of_a_bad_file_is_a_one_line_error(tmp_path, capsys):
     assert main(["replay", str(tmp_path / "bad.mcap")]) == 2  # neither --out nor --sheet
 
 
-@pytest.fixture(scope="module")
-def trained(tmp_path_factory):
-    """A state folder taught and trained (Gabor) on the default simulated scene."""
-    state = tmp_path_factory.mktemp("state")
-    cfg = load_config(None)
-    with open_devices(cfg, seed=7) as devices:
-        fp = FinePositioner(devices, cfg, state_dir=state)
-        fp.teach_auto()
-        fp.acquire("nn1", progress=False)
-        fp.acquire("nn2", progress=False)
-        fp.train()
-    return state
-
-
 @pytest.mark.slow
 def test_overlays_fall_on_the_part_on_the_simulated_cell(trained, tmp_path):
     from sim_backend.cell import hand_camera

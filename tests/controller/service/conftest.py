@@ -26,6 +26,8 @@ from controller.service.sd_notify import Notifier
 from controller.service.service import Service
 from controller.teach.cell_state import CellState
 from drivers.core.pose import Pose
+from sim_backend.emulators.val.server import ValEmulator
+from tests.mocks.fakes import FakeArm
 
 START_TIMEOUT_S = 30.0  # bounds only; no assertion depends on how long anything takes
 EVENT_TIMEOUT_S = 20.0
@@ -38,6 +40,20 @@ def short_dir() -> Iterator[Path]:
     path = Path(tempfile.mkdtemp(prefix="fp-", dir="/tmp"))
     yield path
     shutil.rmtree(path, ignore_errors=True)
+
+
+@pytest.fixture
+def backing():
+    """A fake arm behind the VAL emulator (``emulator``)."""
+    with FakeArm(object_width_mm=30.0) as arm:
+        yield arm
+
+
+@pytest.fixture
+def emulator(backing):
+    """The VAL emulator serving ``backing`` on a pty."""
+    with ValEmulator(backing) as emu:
+        yield emu
 
 
 def service_config(tmp_path: Path, socket_dir: Path, **sections):

@@ -31,7 +31,7 @@ from controller.service.service import Service
 from drivers.core.pose import ToolStep
 from drivers.safety import SafetyLimits
 from drivers.val import ValArm, ValConfig
-from sim_backend.emulators.val.server import ValEmulator, ValFaults
+from sim_backend.emulators.val.server import ValFaults
 from tests.controller.service.conftest import (
     EVENT_TIMEOUT_S,
     NOMINAL,
@@ -50,18 +50,6 @@ REPO = Path(__file__).resolve().parents[3]
 TEACH = {"grasp_depth_mm": 5.0, "object_width_mm": 30.0}
 HANG_S = 30.0  # the dead link's move timeout: what an abort or a stop must not wait for
 BOUND_S = 5.0  # ceiling for "answered at once" / "stopped in time" (far below HANG_S)
-
-
-@pytest.fixture
-def backing():
-    with FakeArm(object_width_mm=30.0) as arm:
-        yield arm
-
-
-@pytest.fixture
-def emulator(backing):
-    with ValEmulator(backing) as emu:
-        yield emu
 
 
 def val_arm(url: str, exchange_timeout_s: float = 0.5,

@@ -52,18 +52,6 @@ def assert_motion_refused(client, arm: FakeArm) -> None:
     assert len(arm.moves) == moves
 
 
-@pytest.fixture
-def backing():
-    with FakeArm(object_width_mm=30.0) as arm:
-        yield arm
-
-
-@pytest.fixture
-def emulator(backing):
-    with ValEmulator(backing) as emu:
-        yield emu
-
-
 def val_arm(url: str) -> ValArm:
     return ValArm(ValConfig(port=url, exchange_timeout_s=LINK_TIMEOUT_S,
                             move_timeout_s=LINK_TIMEOUT_S), LIMITS)

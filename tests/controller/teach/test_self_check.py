@@ -13,20 +13,6 @@ from controller.teach.self_check import CheckLimits, self_check, similarity
 from sim_backend.cell.scene_config import MountConfig
 
 
-@pytest.fixture(scope="module")
-def trained(tmp_path_factory):
-    """A cell taught, acquired and trained on the default (realistic camera) scene."""
-    state = tmp_path_factory.mktemp("state")
-    cfg = load_config(None)
-    with open_devices(cfg) as devices:
-        fp = FinePositioner(devices, cfg, state_dir=state)
-        fp.teach_auto()
-        fp.acquire("nn1", progress=False)
-        fp.acquire("nn2", progress=False)
-        fp.train()
-    return state
-
-
 def test_similarity_is_one_for_the_same_view_and_drops_for_another():
     rng = np.random.default_rng(0)
     image = rng.integers(0, 255, (144, 192, 3), dtype=np.uint8)
