@@ -244,6 +244,7 @@ class _RecordingSensor:
         self._clock = clock
 
     def read(self) -> Wrench:
+        """The wrapped sensor's reading, also written to the recording (cell-clock time)."""
         wrench = self._sensor.read()
         self._recorder.wrench(wrench, self._clock() if self._clock is not None else None)
         return wrench
