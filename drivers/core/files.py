@@ -9,14 +9,11 @@ import fcntl
 import json
 import logging
 import os
-import signal
+import secrets
 import stat
-import tempfile
 from pathlib import Path
 
 logger = logging.getLogger(__name__)
-
-_DEFERRED = {signal.SIGTERM, signal.SIGINT}
 
 
 class FileReadError(OSError):
@@ -106,14 +103,13 @@ def atomic_write_bytes(path: str | Path, data: bytes) -> None:
     """
     path = Path(path)
     path.parent.mkdir(parents=True, exist_ok=True)
-    # SIGTERM/SIGINT wait until the temporary file is known to the cleanup below (their Python
-    # handlers raise; between mkstemp and the try they would leave the file behind): they are
-    # unblocked only inside the try, where a handler that raises finds ``tmp`` set.
-    tmp = None
-    blocked = signal.pthread_sigmask(signal.SIG_BLOCK, _DEFERRED)
+    # The temporary file's name is chosen before anything is created, so an exception at any
+    # point (a SIGTERM/SIGINT handler that raises runs between any two bytecodes, whichever
+    # thread the signal was delivered to) finds it for the cleanup below.
+    tmp = path.parent / f".{path.name}.{secrets.token_hex(4)}.tmp"
     try:
-        fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", suffix=".tmp", dir=path.parent)
-        signal.pthread_sigmask(signal.SIG_SETMASK, blocked)
+        fd = os.open(tmp, os.O_WRONLY | os.O_CREAT | os.O_EXCL | getattr(os, "O_CLOEXEC", 0),
+                     0o600)
         fcntl.flock(fd, fcntl.LOCK_EX)  # tells remove_stale_temp_files it is being written
         with os.fdopen(fd, "wb") as f:
             f.write(data)
@@ -121,12 +117,8 @@ def atomic_write_bytes(path: str | Path, data: bytes) -> None:
             os.fsync(f.fileno())
         os.replace(tmp, path)
     except BaseException:
-        signal.pthread_sigmask(signal.SIG_SETMASK, blocked)  # when mkstemp itself failed
-        if tmp is not None:
-            try:
-                os.unlink(tmp)
-            except FileNotFoundError:
-                pass
+        with contextlib.suppress(FileNotFoundError):
+            os.unlink(tmp)
         raise
     try:
         dir_fd = os.open(path.parent, os.O_RDONLY)
