@@ -17,7 +17,7 @@ import numpy as np
 import pytest
 
 from calibration_free.dataset import grid_offsets
-from calibration_free.synthetic import SyntheticCell, render_dataset
+from calibration_free.synthetic import SyntheticCell, render, render_dataset
 from calibration_free.training import train_bundle
 from controller.config import config_from_mapping
 from controller.devices import CellDevices
@@ -54,6 +54,18 @@ def emulator(backing):
     """The VAL emulator serving ``backing`` on a pty."""
     with ValEmulator(backing) as emu:
         yield emu
+
+
+def cube_view(arm, knock_mm: float = 0.0) -> Callable[[], np.ndarray]:
+    """A FakeCamera source: the synthetic cube as the hand camera sees it from ``arm``'s pose
+    (taught at NOMINAL); ``knock_mm`` shifts the view as a knocked camera would."""
+    scene = SyntheticCell()
+
+    def view() -> np.ndarray:
+        step = arm._pose.tool_step_to(NOMINAL)
+        return render(scene, np.array([step.dx_mm + knock_mm, step.dy_mm, step.dphi_deg]))
+
+    return view
 
 
 def service_config(tmp_path: Path, socket_dir: Path, **sections):

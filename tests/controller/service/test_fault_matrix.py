@@ -24,7 +24,6 @@ import pytest
 import yaml
 
 from calibration_free.bundle import ModelBundle
-from calibration_free.synthetic import SyntheticCell, render
 from controller.loop.iteration_log import IterationLog, LogWriteError, read_log, scan_log
 from controller.service.client import ServiceClient, ServiceError
 from controller.service.service import Service
@@ -38,6 +37,7 @@ from tests.controller.service.conftest import (
     START_TIMEOUT_S,
     client_for,
     copy_state,
+    cube_view,
     device_opener,
     next_state_event,
     running_service,
@@ -422,13 +422,8 @@ def probe_disk_full_under_the_log(tmp_path, short_dir, tiny_disk,
         "loop": {"converge_mm": 0.0, "converge_deg": 0.0}})
     copy_state(cube_model_files, config)
     arm = FakeArm(start=NOMINAL.moved_in_tool_frame(ToolStep(-8.0, 6.0, 0.0, -12.0)))
-    scene = SyntheticCell()
-
-    def view() -> np.ndarray:
-        step = arm._pose.tool_step_to(NOMINAL)
-        return render(scene, np.array([step.dx_mm, step.dy_mm, step.dphi_deg]))
-
-    with running_service(config, device_opener(arm, FakeCamera(view), FakeWrenchSensor())) \
+    with running_service(config, device_opener(arm, FakeCamera(cube_view(arm)),
+                                               FakeWrenchSensor())) \
             as service, client_for(service) as client:
         filler = _fill(tiny_disk)
         job = client.call("position", wait=True, max_loops=3)["job"]

@@ -6,10 +6,8 @@ from __future__ import annotations
 import socket
 import urllib.request
 
-import numpy as np
 from mcap.reader import make_reader
 
-from calibration_free.synthetic import SyntheticCell, render
 from controller.recording.schemas import IMAGE_TOPIC, ITERATION_TOPIC
 from drivers.core.pose import ToolStep
 from tests.mocks.fakes import FakeArm, FakeCamera, FakeWrenchSensor
@@ -17,6 +15,7 @@ from tests.mocks.fakes import FakeArm, FakeCamera, FakeWrenchSensor
 from .conftest import (
     client_for,
     copy_state,
+    cube_view,
     device_opener,
     running_service,
     service_config,
@@ -36,13 +35,8 @@ def test_position_job_is_recorded_and_shown_live(tmp_path, short_dir, cube_model
         "record_dir": str(tmp_path / "rec"), "live_view_port": port})
     copy_state(cube_model_files, config)
     arm = FakeArm(start=NOMINAL.moved_in_tool_frame(ToolStep(-3.0, 2.0, 0.0, -8.0)))
-    scene = SyntheticCell()
-
-    def view() -> np.ndarray:
-        step = arm._pose.tool_step_to(NOMINAL)
-        return render(scene, np.array([step.dx_mm, step.dy_mm, step.dphi_deg]))
-
-    with running_service(config, device_opener(arm, FakeCamera(view), FakeWrenchSensor())) \
+    with running_service(config, device_opener(arm, FakeCamera(cube_view(arm)),
+                                               FakeWrenchSensor())) \
             as service, client_for(service) as client:
         job = client.call("position", wait=True, max_loops=3)["job"]
         assert job["outcome"] == "done", job

@@ -5,17 +5,15 @@ from __future__ import annotations
 
 import shutil
 
-import numpy as np
 import pytest
 
-from calibration_free.synthetic import SyntheticCell, render
 from calibration_free.training import train_bundle
 from controller.service.client import ServiceError
 from controller.teach.cell_state import CellState
 from tests.mocks.fakes import FakeArm, FakeCamera, FakeWrenchSensor
 from tests.synthetic_scene import KAPPA, cell, grids  # noqa: F401  (fixtures)
 
-from .conftest import client_for, device_opener, running_service, service_config
+from .conftest import client_for, cube_view, device_opener, running_service, service_config
 from .test_faults import NOMINAL
 
 
@@ -34,13 +32,9 @@ def taught(grids, tmp_path_factory):  # noqa: F811  (the fixture imported above)
 def test_start_up_check(tmp_path, short_dir, taught, knock_mm, state):
     config = service_config(tmp_path, short_dir, service={"self_check_at_start": True})
     shutil.copytree(taught, config.controller.paths.state_dir)
-    arm, scene = FakeArm(), SyntheticCell()
-
-    def view() -> np.ndarray:  # a knocked camera sees the part shifted at the taught pose
-        step = arm._pose.tool_step_to(NOMINAL)
-        return render(scene, np.array([step.dx_mm + knock_mm, step.dy_mm, step.dphi_deg]))
-
-    with running_service(config, device_opener(arm, FakeCamera(view), FakeWrenchSensor())) \
+    arm = FakeArm()
+    camera = FakeCamera(cube_view(arm, knock_mm))  # a knocked camera: the part looks shifted
+    with running_service(config, device_opener(arm, camera, FakeWrenchSensor())) \
             as service, client_for(service) as client:
         status = client.call("status")
         assert status["state"] == state, status
