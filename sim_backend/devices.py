@@ -54,6 +54,10 @@ class SimArm(Arm):
         timing: the realistic cell's timing (None: ideal, every action instant).
     """
 
+    # As the VAL driver by default (arm.where_before_move: false): a move starts from the pose
+    # the last one reached, with no ``where`` exchange before it.
+    reuse_reached_pose = True
+
     def __init__(self, cell: SimCell, limits: SafetyLimits | None = None,
                  timing: CellTiming | None = None) -> None:
         super().__init__(limits)

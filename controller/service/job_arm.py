@@ -84,9 +84,9 @@ class PreemptibleArm:
         """The wrapped arm's safety limits (None: motions are not checked)."""
         return self.inner.limits
 
-    def pose(self) -> Pose:
-        """Current tool pose (mm, deg), read from the arm and kept as the last pose."""
-        return self._seen(self._run(self.inner.pose))
+    def pose(self, fresh: bool = True) -> Pose:
+        """Current tool pose (mm, deg), from the arm (see ``Arm.pose``), kept as the last pose."""
+        return self._seen(self._run(lambda: self.inner.pose(fresh)))
 
     def tool_rotation_deg(self) -> float:
         """Rotation of the tool about its approach axis, deg (a fresh pose reading)."""

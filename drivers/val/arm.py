@@ -57,7 +57,7 @@ class ValArm(Arm):
         # VAL reports no finger width: the nominal width of the last gripper command.
         self._gripper_closed = False
         self._halts = 0  # counts halt() calls: a segmented move stops when it changes
-        self._last_read: Pose | None = None  # the last ``where`` pose (a move's start)
+        self.reuse_reached_pose = not config.where_before_move
 
     # -- lifecycle -------------------------------------------------------------------------
     def _open(self) -> None:
@@ -149,12 +149,11 @@ class ValArm(Arm):
 
     # -- Arm backend -------------------------------------------------------------------------
     def _read_pose(self) -> Pose:
-        self._last_read = self._where().pose
-        return self._last_read
+        return self._where().pose
 
     def _move_to(self, target: Pose) -> Pose:
         halts = self._halts
-        start, self._last_read = self._last_read, None  # (read just before by move_to/tool)
+        start = self._move_start  # (read or kept just before by move_to / move_tool)
         segments = self._segments(start if start is not None else self._read_pose(), target)
         for i, segment in enumerate(segments):
             if self._halts != halts:

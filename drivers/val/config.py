@@ -65,8 +65,14 @@ class ValConfig:
     move_timeout_s: longest wait for a motion to finish (the prompt after ``do move``).
     where_after_move: read the pose back with ``where`` after every move and report that
         (costs 262 bytes, 273 ms at 9600 baud); off (default): a move's prompt means it is done
-        (confirmed), so the target is reported and the next relative move still starts from a
-        fresh ``where``.
+        (confirmed), so the target is reported.
+    where_before_move: start every move (and its safety check) from a fresh ``where``; off
+        (default): from the pose the last completed move reached (its target: the prompt
+        confirms it done; the arm's repeatability, about 0.05 mm, is the difference), and a
+        ``where`` only after a halt, a fault, a reset, a refused or failed move. Off also skips
+        ``openi`` for jaws the driver itself opened last. The hardware notes call a fresh
+        ``where`` the safest start of a relative move; turn this on when anything else (a
+        pendant, another program) may move the arm between the driver's commands.
     boot_answers: start-up questions (matched case-insensitively as a part of the question
         line) and the answer sent to each; any other question during start-up is an error.
     rejection_errors: controller error texts (part of the ``*...*`` message, any case) that mean
@@ -93,6 +99,7 @@ class ValConfig:
     exchange_timeout_s: float = field(default=2.0, metadata={"min": 0.0, "exclusive_min": True})
     move_timeout_s: float = field(default=60.0, metadata={"min": 0.0, "exclusive_min": True})
     where_after_move: bool = False
+    where_before_move: bool = False
     boot_answers: dict[str, str] = field(default_factory=lambda: {
         "Load VAL from floppy": "n",
         "Initialize": "n",

@@ -303,3 +303,58 @@ def test_a_halt_during_a_segmented_move_sends_no_further_segment():
         while backing.halts == 0 and time.monotonic() < deadline:
             time.sleep(0.01)
         assert backing.halts == 1 and arm.state is Lifecycle.ACTIVE
+
+
+def _counting_wheres(arm: ValArm) -> list[int]:
+    calls = [0]
+    where = arm._where
+
+    def counted():
+        calls[0] += 1
+        return where()
+    arm._where = counted
+    return calls
+
+
+def test_moves_start_from_the_last_reached_pose_without_a_where(emulator, backing):
+    with make_arm(emulator.url) as arm:
+        wheres = _counting_wheres(arm)
+        arm.move_tool(STEP)  # nothing kept yet: one where
+        arm.move_tool(STEP)
+        arm.move_to(arm.pose(fresh=False).moved_in_tool_frame(STEP))
+        assert wheres[0] == 1
+        kept, read = arm.pose(fresh=False), arm.pose()  # the second one reads
+        assert max(abs(a - b) for a, b in zip(kept.as_dict().values(), read.as_dict().values(),
+                                              strict=True)) < 0.01  # the line's 2 decimals
+        assert wheres[0] == 2
+        arm.halt()  # after a halt the next move starts from a fresh reading
+        arm.move_tool(STEP)
+        assert wheres[0] == 3
+        assert arm.open_gripper() == 40.0 and arm.open_gripper() == 40.0  # once on the wire
+        arm.close_gripper()
+        arm.open_gripper()
+
+
+def test_jaws_opened_by_the_driver_are_not_opened_again_until_something_happened(emulator,
+                                                                                 backing):
+    with make_arm(emulator.url) as arm:
+        arm.open_gripper()
+        backing._width_mm = 0.0  # (the backing's jaws, closed behind the driver's back)
+        arm.open_gripper()
+        assert backing.finger_width_mm() == 0.0  # kept: not sent again
+        arm.halt()
+        arm.open_gripper()
+        assert backing.finger_width_mm() == 40.0
+
+
+def test_where_before_move_reads_before_every_move(emulator, backing):
+    with make_arm(emulator.url, where_before_move=True) as arm:
+        wheres = _counting_wheres(arm)
+        arm.move_tool(STEP)
+        arm.move_tool(STEP)
+        arm.pose(fresh=False)
+        assert wheres[0] == 3
+        arm.open_gripper()
+        backing._width_mm = 0.0
+        arm.open_gripper()
+        assert backing.finger_width_mm() == 40.0

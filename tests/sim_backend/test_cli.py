@@ -55,7 +55,9 @@ def test_bench_measures_the_three_medians(tmp_path):
         assert results[key]["median"] > 0 and results[key]["p90"] >= results[key]["median"]
     realistic = results["realistic_look_and_move"]  # cell seconds next to wall time
     assert realistic["cell_ms"] > 0.0 and realistic["wall_ms"] > 0.0
-    assert realistic["wire_ms"] > 272.0 and realistic["motion_ms"] > 0.0
+    # the move's line, its echo and the prompt (a move starts from the pose the last one
+    # reached: no `where`), at 9600 baud
+    assert realistic["wire_ms"] > 100.0 and realistic["motion_ms"] > 0.0
     assert realistic["cell_ms"] == pytest.approx(
         realistic["wire_ms"] + realistic["motion_ms"] + realistic["camera_ms"], rel=0.05)
     out = tmp_path / "bench.json"

@@ -52,8 +52,12 @@ def test_a_longer_move_takes_longer_and_a_lower_speed_slows_it(devices):
     slow = _elapsed(timing, lambda: arm.move_tool(ToolStep(-20.0, 0.0, 0.0, 0.0)))
     arm.set_speed(100)
     assert short < long < slow
-    # a move costs at least t0 + settle on top of its where and the command's wire time
-    assert short > CONFIG.arm.t0_s + CONFIG.arm.settle_s + wire_time_s(262 + 100, 9600)
+    # a move costs at least t0 + settle on top of the command's wire time (it starts from the
+    # pose the last one reached: no where)
+    assert short > CONFIG.arm.t0_s + CONFIG.arm.settle_s + wire_time_s(100, 9600)
+    arm.halt()  # forgets the kept pose: the next move reads it first
+    after_halt = _elapsed(timing, lambda: arm.move_tool(ToolStep(1.0, 0.0, 0.0, 0.0)))
+    assert after_halt == pytest.approx(short + wire_time_s(262, 9600), abs=0.01)
 
 
 def test_the_hand_takes_its_hand_time(devices):
