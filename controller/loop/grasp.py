@@ -1,7 +1,8 @@
 """Force-guarded grasp hand-off: descend with the wrist sensor guarding, close, verify, lift.
 
 From the fine-positioned pre-grasp pose: open the jaws, bias the sensor, descend along the
-approach axis in small steps to the taught grasp depth while the guards watch every reading;
+approach axis to the taught grasp depth (free space in one move, guarded steps where a finger
+can meet the part's top or rim, the rest in one move) while the guards watch every reading;
 close; lift; verify. A tripped guard ends the descent; ``retreat`` guards (and any failed
 check) back off to the start pose. The outcome and the force trace are reported; nothing is
 retried silently.
@@ -44,31 +45,41 @@ DEFAULT_GUARDS = (
 class GraspConfig:
     """Config section ``controller.grasp``.
 
-    step_mm: descent per guarded step; free_descent_mm: the first step's length (the
-    guards read after it too): the part's top lies ``APPROACH_HEIGHT_MM`` (35 mm) below the
-    pre-grasp pose, so the first 30 mm are free space and take one move instead of 30
-    exchanges with the arm; contact_margin_mm: the last part of the descent in
-    which contact is expected (guards named "early contact" are ignored there);
+    free_descent_mm: the first move's length (the guards read after it). The part's top
+    lies ``APPROACH_HEIGHT_MM`` (35 mm; the simulated cube's fingertips meet it at 35.9 mm)
+    below the pre-grasp pose, so the default ends 2 mm below it: a finger landing on the top
+    has pushed into it by 1-2 mm when the guards read, and the way there is free space the
+    camera has just seen; step_mm / guard_zone_mm: below the free descent, guarded steps of
+    ``step_mm`` go down ``guard_zone_mm``, where a finger just over the part's edge meets
+    its rounded rim (on the simulated cube down to 41 mm for a finger 0.5 mm over the edge),
+    so no contact is pushed deeper than one step; below that the fingers pass beside the
+    part's faces and the rest of the descent is one move (the guards read after it). Each
+    step is one VAL exchange and one move (about 0.35 s at 9600 baud); a large zone (100)
+    steps all the way down, as a crowded table may need; contact_margin_mm: the last part of
+    the descent in which contact is expected (guards named "early contact" are ignored there);
     check: how the grip is verified (see the module docstring): ``weight`` (the wrist
     sensor; works on every gripper), ``width`` (the finger width, for grippers that measure
     it) or ``both``; width_tolerance_mm: finger width must be within this of the taught
-    object width; lift_mm: how far to lift after closing (the weight check needs a lift);
-    min_held_weight_n: the least weight (N) the lifted part must put on the wrist sensor
-    (None: half the part's catalogue weight); weight_samples: readings averaged for each
-    weight measurement; max_closing_force_n: a larger change of the mean force while the
-    jaws close means a finger jammed on the part; guards: evaluated in order after every
-    descent step.
+    object width; lift_mm: how far to lift after closing (the weight check needs the part off
+    the table); min_held_weight_n: the least weight (N) the lifted part must put on the wrist
+    sensor (None: half the part's catalogue weight); weight_samples: readings averaged for the
+    two weight measurements (open jaws at the bottom, lifted part); closing_samples: readings
+    averaged after closing for the jam check (its 5 N limit is a hundred times one reading's
+    noise); max_closing_force_n: a larger change of the mean force while the jaws close means
+    a finger jammed on the part; guards: evaluated in order after every descent move.
     """
 
-    step_mm: float = field(default=1.0, metadata={"min": 0.05, "max": 10.0})
-    free_descent_mm: float = field(default=30.0, metadata={"min": 0.0, "max": 100.0})
+    step_mm: float = field(default=2.0, metadata={"min": 0.05, "max": 10.0})
+    free_descent_mm: float = field(default=37.0, metadata={"min": 0.0, "max": 100.0})
+    guard_zone_mm: float = field(default=4.0, metadata={"min": 0.0, "max": 1000.0})
     contact_margin_mm: float = field(default=2.0, metadata={"min": 0.0})
     check: GraspCheck = "weight"
     width_tolerance_mm: float = field(default=4.0, metadata={"min": 0.0})
-    lift_mm: float = field(default=30.0, metadata={"min": 0.0})
+    lift_mm: float = field(default=10.0, metadata={"min": 0.0})
     min_held_weight_n: float | None = field(default=None, metadata={"min": 0.0,
                                                                     "exclusive_min": True})
     weight_samples: int = field(default=16, metadata={"min": 1, "max": 1000})
+    closing_samples: int = field(default=4, metadata={"min": 1, "max": 1000})
     max_closing_force_n: float = field(default=5.0, metadata={"min": 0.0, "exclusive_min": True})
     guards: tuple[Guard, ...] = DEFAULT_GUARDS
 
@@ -129,7 +140,7 @@ def guarded_grasp(arm: Arm, sensor: WrenchSensor, grasp_depth_mm: float,
             raise ValueError("controller.grasp.min_held_weight_n: not set and the part's "
                              "weight is unknown: the weight check has no threshold")
         threshold = part_weight_n / 2.0
-    start: Pose = arm.pose()
+    start: Pose = arm.pose(fresh=False)
     arm.open_gripper()
     sensor.bias()
     result = GraspResult(False, "")
@@ -143,9 +154,15 @@ def guarded_grasp(arm: Arm, sensor: WrenchSensor, grasp_depth_mm: float,
         result.reason, result.retreated = reason, True
         return result
 
+    zone_end = config.free_descent_mm + config.guard_zone_mm
     while depth < grasp_depth_mm - 1e-9:
-        step = min(config.step_mm if depth > 0.0 else max(config.step_mm, config.free_descent_mm),
-                   grasp_depth_mm - depth)
+        if depth == 0.0:
+            step = max(config.step_mm, config.free_descent_mm)
+        elif depth < zone_end - 1e-9:
+            step = min(config.step_mm, zone_end - depth)
+        else:
+            step = grasp_depth_mm - depth
+        step = min(step, grasp_depth_mm - depth)
         arm.move_tool(ToolStep(dz_mm=step))
         depth += step
         result.depth_mm = depth
@@ -168,7 +185,7 @@ def guarded_grasp(arm: Arm, sensor: WrenchSensor, grasp_depth_mm: float,
     open_jaws = mean_force(sensor, samples)
     width = arm.close_gripper()
     result.width_mm = width
-    closing = mean_force(sensor, samples) - open_jaws
+    closing = mean_force(sensor, config.closing_samples) - open_jaws
     result.closing_force_n = float(np.linalg.norm(closing))
     if result.closing_force_n > config.max_closing_force_n:
         return retreat(f"grip check failed: the force changed by {result.closing_force_n:.1f} N "

@@ -6,10 +6,11 @@ import pytest
 from controller.loop.grasp import GraspConfig, guarded_grasp
 from controller.loop.guards import Guard, first_tripped, tripped
 from drivers.interfaces import Wrench
-from tests.mocks.fakes import FakeArm, FakeWrenchSensor
+from tests.mocks.fakes import HOME, FakeArm, FakeWrenchSensor
 
 ZERO = Wrench(0, 0, 0, 0, 0, 0)
 BY_WIDTH = GraspConfig(check="width")
+HOME_Z = HOME.z_mm
 
 
 def w(fz=0.0, fx=0.0, tz=0.0):
@@ -62,22 +63,42 @@ def test_grasp_succeeds_when_free_descent_reaches_depth():
     start = arm.pose()
     res = guarded_grasp(arm, sensor, 40.0, 30.0, BY_WIDTH)
     assert res.success and res.depth_mm == pytest.approx(40.0)
-    assert arm.pose().z_mm == pytest.approx(start.z_mm - 40.0 + 30.0)  # lifted 30 mm
+    assert arm.pose().z_mm == pytest.approx(start.z_mm - 40.0 + BY_WIDTH.lift_mm)  # lifted
 
 
-def test_the_free_descent_is_one_move_and_the_guards_read_after_it():
+def test_the_descent_goes_free_then_steps_over_the_rim_then_in_one_move():
+    # 37 mm through free space to 2 mm below the part's top (35 mm down), 2 mm steps down to
+    # 41 mm (the rim), then the rest at once; the guards read after each.
     arm, sensor = setup(contact_depth_mm=100.0)
+    res = guarded_grasp(arm, sensor, 50.0, 30.0, BY_WIDTH)
+    assert res.success and len(res.forces_n) == 4
+    assert [round(HOME_Z - p.z_mm, 6) for p in arm.moves[:4]] == [37.0, 39.0, 41.0, 50.0]
+    arm, sensor = setup(contact_depth_mm=10.0)  # something 10 mm down: 27 mm too deep at once
     res = guarded_grasp(arm, sensor, 40.0, 30.0, BY_WIDTH)
+    assert not res.success and res.retreated and res.forces_n == [108.0]
+
+
+def test_a_finger_on_the_parts_top_or_rim_is_caught_one_step_in():
+    for contact_mm, forces in ((35.0, [8.0]), (38.5, [0.0, 2.0, 10.0])):
+        arm, sensor = setup(contact_depth_mm=contact_mm)
+        start = arm.pose()
+        res = guarded_grasp(arm, sensor, 50.0, 30.0, BY_WIDTH)
+        assert not res.success and res.retreated and "early contact" in res.reason
+        assert res.forces_n == forces and arm.pose() == start  # pushed <= 2 mm, then back
+
+
+def test_small_steps_feel_the_way_down():
+    arm, sensor = setup(contact_depth_mm=100.0)
+    res = guarded_grasp(arm, sensor, 40.0, 30.0, GraspConfig(check="width", free_descent_mm=30.0,
+                                                              step_mm=1.0, guard_zone_mm=100.0))
     assert res.success and len(res.forces_n) == 1 + 10  # 30 mm at once, then 1 mm steps
-    arm, sensor = setup(contact_depth_mm=10.0)  # something 10 mm down: 20 mm too deep at once
-    res = guarded_grasp(arm, sensor, 40.0, 30.0, BY_WIDTH)
-    assert not res.success and res.retreated and res.forces_n == [80.0]
 
 
 def test_early_contact_retreats_to_start():
     arm, sensor = setup(contact_depth_mm=10.0)
     start = arm.pose()
-    res = guarded_grasp(arm, sensor, 40.0, 30.0, GraspConfig(check="width", free_descent_mm=0.0))
+    res = guarded_grasp(arm, sensor, 40.0, 30.0, GraspConfig(check="width", free_descent_mm=0.0,
+                                                              step_mm=1.0, guard_zone_mm=100.0))
     assert not res.success and res.retreated and "early contact" in res.reason
     assert res.depth_mm < 20.0
     assert arm.pose() == start and arm.finger_width_mm() == 40.0
