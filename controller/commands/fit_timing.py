@@ -61,8 +61,12 @@ def time_moves(arm, distances_mm, speeds, repeats: int, out=sys.stderr) -> list[
         raise FineposError("the controller's where reply has no JT1..JT6 joint angles; the fit "
                            "needs them")
     where_median = statistics.median(where_s)
-    wheres = 2 if cfg.where_after_move else 1  # the driver's exchanges around a move
+    # The driver's where exchanges around a move: before it only when configured (otherwise
+    # it starts from the last move's target, kept from the warm-up move below on), after it
+    # only when configured.
+    wheres = int(cfg.where_before_move) + int(cfg.where_after_move)
     home = reading.pose
+    arm.move_to(home)  # a kept start pose from here on
     moves: list[TimedMove] = []
     for speed in speeds:
         arm.set_speed(speed)
