@@ -53,6 +53,11 @@ class FrontEnd:
         nominal_uv_px: where the part appeared at the taught pose (u, v); of several blobs
             that match the part, one clearly nearest this point is taken. None: several
             matching blobs are ambiguous.
+        chroma: the part's colour in the training images, as chromaticity (R, G, B over
+            their sum, summed over its blob: independent of brightness); where several blobs
+            are measured (a cluttered image), one of another colour is not the part. None:
+            colour is not checked (model files written before it was learned).
+        chroma_tolerance: the largest chromaticity distance still taken for the part.
     """
 
     frame_height_px: int
@@ -65,6 +70,8 @@ class FrontEnd:
     max_elongation: float = NO_ELONGATION_LIMIT
     channel: Channel = "max"
     nominal_uv_px: tuple[float, float] | None = None
+    chroma: tuple[float, float, float] | None = None
+    chroma_tolerance: float = 0.0
 
     def __post_init__(self) -> None:
         for name in ("frame_height_px", "frame_width_px"):
@@ -91,6 +98,14 @@ class FrontEnd:
                 raise ConfigError(f"front end: nominal_uv_px must be two finite numbers, got "
                                   f"{self.nominal_uv_px!r}")
             object.__setattr__(self, "nominal_uv_px", uv)
+        if self.chroma is not None:
+            chroma = tuple(float(v) for v in self.chroma)
+            if len(chroma) != 3 or not all(0.0 <= v <= 1.0 for v in chroma) or not (
+                    0.0 < self.chroma_tolerance <= 1.0):
+                raise ConfigError(f"front end: chroma must be three numbers in 0..1 and "
+                                  f"0 < chroma_tolerance <= 1, got {self.chroma!r}, "
+                                  f"{self.chroma_tolerance!r}")
+            object.__setattr__(self, "chroma", chroma)
 
     def preprocess(self, image: np.ndarray) -> np.ndarray:
         """The image localisation binarises and the ROI is cut from (HxW float32): the
@@ -114,18 +129,25 @@ class FrontEnd:
             return sat.astype(np.float32)
         return normalise(gray, self.intensity)
 
-    def localise(self, preprocessed: np.ndarray) -> Localisation:
+    def localise(self, preprocessed: np.ndarray, image: np.ndarray | None = None
+                 ) -> Localisation:
         """The object's centroid in an image from ``preprocess``.
 
         Args:
             preprocessed: HxW float32, what ``preprocess`` returned for the frame.
+            image: the RGB frame itself: with it (and a learned ``chroma``), blobs of
+                another colour are not taken for the part in a cluttered image.
 
         Returns:
             The Localisation (ok, no_object or ambiguous, with the reason).
         """
+        check = None
+        if image is not None and self.chroma is not None:
+            check = colour_check(image, self.chroma, self.chroma_tolerance)
         return localise(preprocessed, self.threshold, self.expected_area_px,
                         polarity=self.polarity, area_tolerance=self.area_tolerance,
-                        max_elongation=self.max_elongation, expected_uv=self.nominal_uv_px)
+                        max_elongation=self.max_elongation, expected_uv=self.nominal_uv_px,
+                        blob_check=check)
 
     def locate(self, image: np.ndarray) -> tuple[np.ndarray, Localisation]:
         """``preprocess`` then ``localise``: one frame's preprocessed image and the object.
@@ -140,7 +162,7 @@ class FrontEnd:
             ImageError: not HxWx3 uint8 of the training frames' size.
         """
         preprocessed = self.preprocess(image)
-        return preprocessed, self.localise(preprocessed)
+        return preprocessed, self.localise(preprocessed, image)
 
     def to_info(self) -> dict[str, Any]:
         """The JSON a model file stores: keys ``frame_px``, ``intensity``, ``localisation``.
@@ -149,18 +171,21 @@ class FrontEnd:
             A JSON-able dict; ``from_info`` reads it back.
         """
         uv = None if self.nominal_uv_px is None else list(self.nominal_uv_px)
+        chroma = None if self.chroma is None else list(self.chroma)
         return {"frame_px": {"height": self.frame_height_px, "width": self.frame_width_px},
                 "intensity": {"mean": self.intensity.mean, "std": self.intensity.std},
                 "localisation": {"threshold": self.threshold, "polarity": self.polarity,
                                  "expected_area_px": self.expected_area_px,
                                  "area_tolerance": self.area_tolerance,
                                  "max_elongation": self.max_elongation,
-                                 "channel": self.channel, "nominal_uv_px": uv}}
+                                 "channel": self.channel, "nominal_uv_px": uv,
+                                 "chroma": chroma,
+                                 "chroma_tolerance": self.chroma_tolerance}}
 
     @classmethod
     def from_info(cls, info: Mapping[str, Any]) -> FrontEnd:
-        """Inverse of ``to_info``. ``localisation.channel`` and ``nominal_uv_px`` may be
-        absent (baseline model files written before they were stored): "max" and None.
+        """Inverse of ``to_info``. ``localisation.channel``, ``nominal_uv_px`` and ``chroma``
+        may be absent (model files written before they were stored): "max", None and None.
 
         Args:
             info: a model file's JSON (at least ``frame_px``, ``intensity``,
@@ -172,8 +197,60 @@ class FrontEnd:
         """
         loc = info["localisation"]
         uv = loc.get("nominal_uv_px")
+        chroma = loc.get("chroma")
         return cls(int(info["frame_px"]["height"]), int(info["frame_px"]["width"]),
                    IntensityStats(**info["intensity"]), float(loc["threshold"]),
                    loc["polarity"], float(loc["expected_area_px"]),
                    float(loc["area_tolerance"]), float(loc["max_elongation"]),
-                   loc.get("channel", "max"), None if uv is None else tuple(uv))
+                   loc.get("channel", "max"), None if uv is None else tuple(uv),
+                   None if chroma is None else tuple(chroma),
+                   float(loc.get("chroma_tolerance", 0.0)))
+
+
+# The colour check's tolerance: this many times the largest chromaticity distance seen among
+# the training images (lighting, noise, the part's own shading), and at least the floor: the
+# construction set's colours lie 0.2 or more apart (yellow, wood, red, green, blue).
+CHROMA_SPREAD_FACTOR = 2.0
+CHROMA_MIN_TOLERANCE = 0.06
+
+
+def blob_chroma(image: np.ndarray, mask: np.ndarray, box: tuple[int, int, int, int]
+                ) -> tuple[float, float, float] | None:
+    """The chromaticity (R, G, B over their sum, summed over the blob) of the pixels of
+    ``mask`` (the blob within its bounding box ``box`` = x, y, w, h) in the RGB ``image``;
+    None for a black blob."""
+    x, y, w, h = box
+    pixels = image[y:y + h, x:x + w][mask].astype(np.float64)
+    total = pixels.sum(axis=0)
+    s = float(total.sum())
+    if s <= 0.0:
+        return None
+    return tuple(float(v) for v in total / s)
+
+
+def colour_check(image: np.ndarray, chroma: tuple[float, float, float], tolerance: float):
+    """A ``localise`` blob check: the blob's chromaticity within ``tolerance`` of ``chroma``."""
+    ref = np.asarray(chroma)
+
+    def check(mask: np.ndarray, box: tuple[int, int, int, int]) -> bool:
+        c = blob_chroma(image, mask, box)
+        return c is not None and float(np.linalg.norm(np.asarray(c) - ref)) <= tolerance
+    return check
+
+
+def learn_chroma(images: list[np.ndarray], masks: list[tuple[np.ndarray, tuple]]
+                 ) -> tuple[tuple[float, float, float], float] | None:
+    """The part's chromaticity and the colour check's tolerance from its blob in training
+    images: the median chromaticity, and ``CHROMA_SPREAD_FACTOR`` times the largest distance
+    from it (at least ``CHROMA_MIN_TOLERANCE``). ``masks``: per image, the part's blob within
+    its bounding box and the box. None when no blob has any colour."""
+    found = [c for image, (mask, box) in zip(images, masks, strict=True)
+             if (c := blob_chroma(image, mask, box)) is not None]
+    if not found:
+        return None
+    values = np.array(found)
+    centre = np.median(values, axis=0)
+    centre = centre / centre.sum()
+    spread = float(np.linalg.norm(values - centre, axis=1).max())
+    tolerance = min(1.0, max(CHROMA_MIN_TOLERANCE, CHROMA_SPREAD_FACTOR * spread))
+    return tuple(float(v) for v in centre), tolerance

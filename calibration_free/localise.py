@@ -14,6 +14,7 @@ Coordinates are pixel-centre coordinates: pixel (row i, column j) covers u in [j
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from dataclasses import dataclass
 from typing import Literal
 
@@ -24,6 +25,9 @@ from calibration_free.errors import ImageError
 from drivers.core.errors import ConfigError
 
 Status = Literal["ok", "no_object", "ambiguous"]
+# A further test of a candidate blob (its pixels within its bounding box x, y, w, h): True if
+# it may be the part (``FrontEnd`` checks its colour).
+BlobCheck = Callable[[np.ndarray, tuple[int, int, int, int]], bool]
 Polarity = Literal["bright", "dark"]
 Method = Literal["histogram", "components"]
 
@@ -145,7 +149,8 @@ def localise(normalised: np.ndarray, threshold: float, expected_area_px: float |
              *, polarity: Polarity = "bright", area_tolerance: float = AREA_TOLERANCE,
              min_blob_px: int = MIN_BLOB_PX,
              max_elongation: float = NO_ELONGATION_LIMIT,
-             expected_uv: tuple[float, float] | None = None) -> Localisation:
+             expected_uv: tuple[float, float] | None = None,
+             blob_check: BlobCheck | None = None) -> Localisation:
     """Find the object's centre in a normalised image.
 
     Args:
@@ -161,6 +166,8 @@ def localise(normalised: np.ndarray, threshold: float, expected_area_px: float |
         expected_uv: where the part appeared at the taught pose. When several blobs match,
             the one nearest this point is taken if it is clearly nearest (closer than
             ``NEAREST_RATIO`` times the runner-up); otherwise the result is ambiguous.
+        blob_check: where several blobs are measured (the components path), a blob of the
+            part's area and shape is a candidate only if this also accepts it.
 
     Returns:
         The Localisation; see its docstring for the three statuses.
@@ -191,7 +198,7 @@ def localise(normalised: np.ndarray, threshold: float, expected_area_px: float |
                                 float(rows @ _coords(rows.size)) / area, area, "",
                                 "histogram")
     return _by_components(mask, expected_area_px, area_tolerance, min_blob_px, max_elongation,
-                          expected_uv)
+                          expected_uv, blob_check)
 
 
 def _single_run(hist: np.ndarray) -> tuple[int, int]:
@@ -220,7 +227,8 @@ def elongation(mask: np.ndarray) -> float:
 
 def _by_components(mask: np.ndarray, expected_area_px: float | None, area_tolerance: float,
                    min_blob_px: int, max_elongation: float,
-                   expected_uv: tuple[float, float] | None) -> Localisation:
+                   expected_uv: tuple[float, float] | None,
+                   blob_check: BlobCheck | None = None) -> Localisation:
     n, labels, stats, centroids = cv2.connectedComponentsWithStatsWithAlgorithm(
         mask.astype(np.uint8), 8, cv2.CV_32S, cv2.CCL_BBDT)
     areas = stats[1:n, cv2.CC_STAT_AREA].astype(np.float64)
@@ -253,6 +261,14 @@ def _by_components(mask: np.ndarray, expected_area_px: float | None, area_tolera
                 "no_object", None, None, None,
                 f"no blob within {area_tolerance:.0%} of the expected {expected_area_px:.0f} px"
                 f" (largest: {areas[blobs].max():.0f} px of {blobs.size} blobs)", "components")
+        if blob_check is not None:
+            checked = [i for i in close if _blob_passes(labels, stats, int(i) + 1, blob_check)]
+            if not checked:
+                return Localisation(
+                    "no_object", None, None, None,
+                    f"{close.size} blob(s) of the part's area and shape, none of its colour",
+                    "components")
+            close = np.array(checked, dtype=close.dtype)
         if close.size > 1:
             nearest = _clearly_nearest(centroids[close + 1], expected_uv)
             if nearest is None:
@@ -268,6 +284,11 @@ def _by_components(mask: np.ndarray, expected_area_px: float | None, area_tolera
     others = blobs.size - 1
     return Localisation("ok", float(u), float(v), float(areas[picked]),
                         f"picked among {others + 1} blobs" if others else "", "components")
+
+
+def _blob_passes(labels: np.ndarray, stats: np.ndarray, label: int, check: BlobCheck) -> bool:
+    x, y, w, h = (int(v) for v in stats[label, :4])
+    return check(labels[y:y + h, x:x + w] == label, (x, y, w, h))
 
 
 def _blob_elongation(labels: np.ndarray, stats: np.ndarray, label: int) -> float:

@@ -95,7 +95,7 @@ class Perception:
         t0 = clock()
         normalised = self._front.preprocess(image)
         t1 = clock()
-        loc = self._front.localise(normalised)
+        loc = self._front.localise(normalised, image)
         t2 = clock()
         timings = {"preprocess": (t1 - t0) / 1e3, "localise": (t2 - t1) / 1e3}
         if loc.status != "ok":

@@ -24,7 +24,7 @@ from calibration_free import angles
 from calibration_free.bundle import ModelBundle
 from calibration_free.dataset import Dataset
 from calibration_free.errors import TrainingError
-from calibration_free.front_end import FrontEnd
+from calibration_free.front_end import FrontEnd, learn_chroma
 from calibration_free.gabor import GaborBank, GaborConfig
 from calibration_free.localise import (
     Localisation,
@@ -198,9 +198,27 @@ def prepare_training(sets: dict[str, Dataset], polarity: Polarity = "bright",
                     for n in located[name]]
              for name in sets}
     usable = {name: _usable(found[name], name) for name in sets}
+    # The part's colour, so that a blob of its size and shape but another colour is not taken
+    # for it in a cluttered image.
+    blobs = [(sets[name].images[i], _blob_at(located[name][i], threshold, polarity,
+                                             found[name][i]))
+             for name in sets for i in usable[name]]
+    colour = learn_chroma([im for im, _ in blobs], [b for _, b in blobs])
+    chroma, chroma_tolerance = colour if colour is not None else (None, 0.0)
     front = FrontEnd(height, width, intensity, threshold, polarity, expected_area, tolerance,
-                     max_elongation, channel)
+                     max_elongation, channel, chroma=chroma, chroma_tolerance=chroma_tolerance)
     return PreparedSets(front, located, found, usable, time.perf_counter() - start)
+
+
+def _blob_at(preprocessed: np.ndarray, threshold: float, polarity: Polarity,
+             loc: Localisation) -> tuple[np.ndarray, tuple[int, int, int, int]]:
+    """The blob whose centroid is the localisation's (a nut's centroid lies in its hole),
+    within its bounding box, and the box (x, y, w, h)."""
+    mask = binarise(preprocessed, threshold, polarity).astype(np.uint8)
+    n, labels, stats, centroids = cv2.connectedComponentsWithStats(mask, connectivity=8)
+    label = 1 + int(np.argmin(np.hypot(centroids[1:, 0] - loc.u_px, centroids[1:, 1] - loc.v_px)))
+    x, y, w, h = (int(v) for v in stats[label, :4])
+    return labels[y:y + h, x:x + w] == label, (x, y, w, h)
 
 
 def _elongation_of_largest_blob(normalised: np.ndarray, threshold: float,

@@ -111,15 +111,20 @@ def test_a_file_in_the_version_4_layout_loads_and_is_still_written(bundle, cell,
     path = tmp_path / "v4.bundle"
     path.write_bytes(pack(version_4_info(bundle), bundle.arrays(), version=4))
     old = ModelBundle.load(path, expect_object="cube")
-    assert old.front == bundle.front and old.training == {"seed": 0}
+    # a version-4 file has no learned colour: the same front end without the colour check
+    assert old.front.chroma is None and bundle.front.chroma is not None
+    assert old.front == dataclasses.replace(bundle.front, chroma=None, chroma_tolerance=0.0)
+    assert old.training == {"seed": 0}
     frame = render(cell, np.array([-1.5, 2.0, 8.0]), np.random.default_rng(2))
     p, q = Perception(bundle).perceive(frame), Perception(old).perceive(frame)
     assert (p.nn1_mm, p.full_mm, p.nn2_sc, p.dphi_deg) == (q.nn1_mm, q.full_mm, q.nn2_sc,
                                                             q.dphi_deg)
-    written = bundle.to_info()  # and saving writes the same layout
+    written = bundle.to_info()  # and saving writes the same layout, plus the part's colour
     expected = version_4_info(bundle)
     assert sorted(written) == sorted(expected)
-    assert written["localisation"] == expected["localisation"]
+    assert written["localisation"] == {**expected["localisation"],
+                                       "chroma": list(bundle.front.chroma),
+                                       "chroma_tolerance": bundle.front.chroma_tolerance}
     assert written["frame_px"] == expected["frame_px"]
     assert written["intensity"] == expected["intensity"]
 
