@@ -10,6 +10,7 @@ cell, good light, the cube.
 
 from __future__ import annotations
 
+import dataclasses
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any, Literal
@@ -23,6 +24,7 @@ from controller.loop.grasp import GraspConfig
 from controller.loop.positioning import LoopConfig
 from controller.service.config import ServiceConfig
 from controller.teach.spacenav import TeachConfig
+from controller.teach.state_folder import check_part
 from drivers.core.errors import ConfigError
 from drivers.core.timing import TimingConfig
 from drivers.core.typed_config import from_mapping, load_yaml_file
@@ -34,12 +36,15 @@ from sim_backend.cell.scene_config import PartKind, SceneConfig
 class GridConfig:
     """One acquisition grid: displacements in [-a, a] x [-a, a] x [-b, b] on ``shape`` points.
 
-    b_deg: None means 180/kappa (the object's whole symmetry period).
+    b_deg: None means 180/kappa (the object's whole symmetry period); staggered: each position
+    takes its rotations shifted by another fraction of their spacing, so the grid shows
+    nx * ny * nphi distinct rotations instead of nphi (``dataset.staggered_grid_offsets``).
     """
 
     a_mm: float = field(default=25.0, metadata={"min": 0.0})
     b_deg: float | None = field(default=None, metadata={"min": 0.0})
     shape: tuple[int, int, int] = field(default=(3, 3, 7), metadata={"min": 1})
+    staggered: bool = False
 
 
 @dataclass(frozen=True)
@@ -48,13 +53,17 @@ class AcquisitionConfig:
     defaults) and the random test set."""
 
     nn1: GridConfig = GridConfig(a_mm=25.0)
-    nn2: GridConfig = GridConfig(a_mm=5.0)
+    nn2: GridConfig = GridConfig(a_mm=5.0, staggered=True)
     test_count: int = field(default=50, metadata={"min": 1})
 
 
 @dataclass(frozen=True)
 class PathsConfig:
-    """Config section ``controller.paths``: where state, datasets, models and logs go."""
+    """Config section ``controller.paths``: where state, datasets, models and logs go.
+
+    state_dir holds one folder per taught part (``<part>/cell.json``, ``<part>/datasets/``,
+    ``<part>/model-<system>.<suffix>``; ``controller.teach.state_folder``).
+    """
 
     state_dir: str = "state"
     log_dir: str = "runs"
@@ -66,7 +75,8 @@ class ControllerConfig:
 
     part: the part this cell grasps, from the parts catalogue (``drivers.core.parts``: cube |
     nut | ledge | screw); teach-in on a real cell takes its symmetry and grasp geometry from
-    there. On the simulated cell the part on the table (``scene.object.kind``) is taught.
+    there. On the simulated cell the part on the table (``scene.object.kind``) is taught. The
+    commands' ``--part`` (and a service job's ``part``) overrides both (``with_part``).
     """
 
     part: PartKind = "cube"
@@ -154,3 +164,29 @@ def load_config(path: str | Path | None) -> FineposConfig:
     except ConfigError as exc:
         msg = str(exc)
         raise ConfigError(msg if msg.startswith(str(path)) else f"{path}: {msg}") from exc
+
+
+def is_simulated(config: FineposConfig) -> bool:
+    """Whether any device is simulated, so the simulated cell (and its part) is built."""
+    return any(getattr(config, kind).type == "sim" for kind in ("arm", "camera", "wrench"))
+
+
+def cell_part(config: FineposConfig) -> str:
+    """The part the cell is set up for: on the simulated cell the part on its table
+    (``scene.object.kind``), on a real cell ``controller.part``."""
+    return config.scene.object.kind if is_simulated(config) else config.controller.part
+
+
+def with_part(config: FineposConfig, kind: str) -> FineposConfig:
+    """``config`` set up for part ``kind``: ``controller.part``, and the simulated table's part
+    (``scene.object.kind``; its placement and colour stay the scene's).
+
+    Raises:
+        ConfigError: ``kind`` is not in the parts catalogue (the message lists the parts).
+    """
+    check_part(kind)
+    scene = config.scene
+    if scene.object.kind != kind:
+        scene = dataclasses.replace(scene, object=dataclasses.replace(scene.object, kind=kind))
+    return dataclasses.replace(
+        config, controller=dataclasses.replace(config.controller, part=kind), scene=scene)

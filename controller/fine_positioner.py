@@ -2,7 +2,8 @@
 
 ``FinePositioner`` owns nothing but references: the opened devices (``controller.devices``),
 the config, and an optional iteration log. The CLI creates one per command; the service keeps
-one for its lifetime. Files live under ``controller.paths.state_dir``: ``cell.json`` (teach-in),
+one for its lifetime. Files live in its state folder, the part's folder under
+``controller.paths.state_dir`` (``controller.teach.state_folder``): ``cell.json`` (teach-in),
 ``datasets/<set>.npz``, ``model-<system>.<suffix>``.
 """
 

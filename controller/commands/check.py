@@ -17,6 +17,7 @@ import argparse
 import dataclasses
 
 from controller.commands.common import add_config_option, config_from_args, positive_float
+from controller.config import cell_part
 from controller.devices import open_devices
 from controller.fine_positioner import FinePositioner
 from controller.systems.registry import SYSTEMS
@@ -27,6 +28,7 @@ from controller.teach.self_check import (
     CheckLimits,
     self_check,
 )
+from controller.teach.state_folder import StateFolder
 from drivers.core import parts
 from drivers.core.files import write_json
 
@@ -46,9 +48,15 @@ def run(args) -> int:
     config = config_from_args(args)
     if args.part is not None:
         config = _with_part(config, args.part)
+    folder = StateFolder(args.state_dir or config.controller.paths.state_dir, cell_part(config))
+    kind = folder.resolve(args.part, cell_part(config))
+    taught = folder.taught()
+    # A part not taught, with another one taught: check against that one, so the check fires.
+    state_dir = taught.get(kind) or (next(iter(taught.values())) if len(taught) == 1
+                                     else folder.part_dir(kind))
     limits = CheckLimits(args.max_mm, args.max_deg, args.min_similarity)
     with open_devices(config, seed=args.seed) as devices:
-        fp = FinePositioner(devices, config, state_dir=args.state_dir)
+        fp = FinePositioner(devices, config, state_dir=state_dir)
         state = fp.state()
         expected = args.part or (devices.cell.object_kind if devices.cell is not None
                                  else config.controller.part)

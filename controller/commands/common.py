@@ -8,10 +8,14 @@ import sys
 import time
 from pathlib import Path
 
-from controller.config import load_config
+from controller.config import cell_part, load_config, with_part
 from controller.loop.iteration_log import IterationLog
 from controller.recording.writer import RunRecorder
+from controller.teach.state_folder import StateFolder
+from drivers.core import parts
 from drivers.core.errors import ConfigError
+
+ALL_PARTS = "all"
 
 
 def positive_float(text: str) -> float:
@@ -59,6 +63,57 @@ def add_config_option(parser: argparse.ArgumentParser) -> None:
     add_config_file_option(parser)
     parser.add_argument("--state-dir", metavar="DIR",
                         help="override controller.paths.state_dir (teach-in, datasets, models)")
+
+
+def part_name(text: str) -> str:
+    """argparse type: a part of the catalogue (``drivers.core.parts``)."""
+    if text not in parts.PARTS:
+        raise argparse.ArgumentTypeError(f"unknown part {text[:40]!r} (known parts: "
+                                          f"{', '.join(parts.PARTS)})")
+    return text
+
+
+def part_name_or_all(text: str) -> str:
+    """argparse type: a part of the catalogue, or ``all`` (every part)."""
+    if text == ALL_PARTS:
+        return text
+    if text not in parts.PARTS:
+        raise argparse.ArgumentTypeError(f"unknown part {text[:40]!r} (known parts: "
+                                          f"{', '.join(parts.PARTS)}, or {ALL_PARTS})")
+    return text
+
+
+def add_part_option(parser: argparse.ArgumentParser, default_help: str) -> None:
+    """``--part NAME``: the part of the catalogue the command works on; on the simulated cell
+    that part is also put on the table. ``default_help`` says what applies without it."""
+    parser.add_argument("--part", metavar="NAME", type=part_name,
+                        help=f"the part: {' | '.join(parts.PARTS)} (default: {default_help}); "
+                             "on the simulated cell it is put on the table")
+
+
+TAUGHT_PART_HELP = "the one part taught, else the cell's: controller.part or the simulated table's"
+
+
+def part_setup(args, config, *, teach: bool = False):
+    """The config set up for the command's part, and that part's state folder.
+
+    The part is ``--part``; without it, for ``teach`` the cell's part (the simulated table's, or
+    ``controller.part`` on a real cell), otherwise the one part taught (the cell's when none
+    is).
+
+    Returns:
+        (config with ``controller.part`` and the simulated table's part set, the part's folder
+        under ``--state-dir`` or ``controller.paths.state_dir``).
+
+    Raises:
+        ConfigError: several parts are taught and none is named.
+    """
+    default = cell_part(config)
+    folder = StateFolder(getattr(args, "state_dir", None) or config.controller.paths.state_dir,
+                         default)
+    requested = getattr(args, "part", None)
+    kind = (requested or default) if teach else folder.resolve(requested, default)
+    return with_part(config, kind), folder.part_dir(kind)
 
 
 def add_log_option(parser: argparse.ArgumentParser) -> None:

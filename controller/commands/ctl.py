@@ -1,7 +1,8 @@
 """``finepos ctl``: the control API's command-line client (see ``controller.service``).
 
 The subcommands and their options are generated from ``controller.service.commands.COMMANDS``, so
-the client and the service cannot disagree about them. Job commands wait for the job to end
+the client and the service cannot disagree about them. Every job command takes ``--part NAME``
+(default: the one part taught; teach: the cell's part). Job commands wait for the job to end
 (``--no-wait``: only start it). The result is printed as JSON; the exit status is 0, or 1 for an
 error response or a job that did not end ``done``.
 """
@@ -22,15 +23,18 @@ from drivers.core.errors import ConfigError
 DEFAULT_SOCKET = ServiceConfig.socket_path
 # Subcommand: (runnable example, what it does).
 LEAVES = {
-    "status": ("finepos ctl status", "state, pose, job, last iteration, model in use, fault"),
-    "teach": ("finepos ctl teach --auto", "record the nominal pose (--auto: simulated cell; "
-              "otherwise the arm's current pose, for controller.part)"),
-    "acquire": ("finepos ctl acquire --set nn1", "take a training or test set"),
-    "train": ("finepos ctl train --system gabor", "train a model from nn1 and nn2"),
-    "position": ("finepos ctl position --offset 12,-8,20", "run the positioning loop"),
-    "grasp": ("finepos ctl grasp", "force-guarded grasp from the current pose"),
+    "status": ("finepos ctl status", "state, pose, job, last iteration, taught parts and "
+               "their models in use, fault"),
+    "teach": ("finepos ctl teach --auto --part nut", "record the nominal pose of a part "
+              "(--auto: simulated cell; otherwise the arm's current pose)"),
+    "acquire": ("finepos ctl acquire --set nn1 --part nut", "take a training or test set"),
+    "train": ("finepos ctl train --system gabor --part nut", "train a model from nn1 and nn2"),
+    "position": ("finepos ctl position --offset 12,-8,20 --part nut",
+                 "run the positioning loop"),
+    "grasp": ("finepos ctl grasp --part nut", "force-guarded grasp from the current pose"),
     "abort": ("finepos ctl abort", "preempt the running job and halt the arm"),
-    "reload": ("finepos ctl reload", "load the model from the state folder into use"),
+    "reload": ("finepos ctl reload", "load the models of the taught parts from the state "
+               "folder into use"),
     "reset": ("finepos ctl reset", "leave fault once the cause is gone"),
     "stream": ("finepos ctl stream --count 20", "print iteration records and state changes"),
 }

@@ -2,7 +2,8 @@
 
 Auto-teach, acquire the NN1 and NN2 grids, train, then position and grasp 50 random placements
 in good and in poor light; writes a table, a convergence plot, the logs and a replay of the
-first trial in each light (replay-<light>.mcap, .mp4, .png).
+first trial in each light (replay-<light>.mcap, .mp4, .png). --part NAME: the whole job with
+that part on the table (default: the scene's).
 
 Example: finepos demo --out out/demo
 """
@@ -18,11 +19,13 @@ from pathlib import Path
 
 from controller.commands.common import (
     add_config_option,
+    add_part_option,
     add_timing_option,
     config_from_args,
     positive_int,
     with_timing,
 )
+from controller.config import with_part
 from controller.evaluation.metrics import summarise, wilson
 from controller.evaluation.plots import plot_convergence
 from controller.evaluation.trials import run_trials, train_on_default_scene, with_lighting
@@ -87,6 +90,8 @@ def write_replay(recording: Path) -> tuple[Path, Path]:
 def run(args) -> int:
     """Teach, acquire, train and evaluate gabor in good and poor light; write all to ``--out``."""
     config = with_timing(config_from_args(args), args.timing)
+    if args.part is not None:
+        config = with_part(config, args.part)
     out = Path(args.out)
     out.mkdir(parents=True, exist_ok=True)
     t0 = time.perf_counter()
@@ -130,6 +135,7 @@ def run(args) -> int:
 def add_arguments(parser: argparse.ArgumentParser) -> None:
     """The options of ``finepos demo``."""
     add_config_option(parser)
+    add_part_option(parser, "the scene's, scene.object.kind")
     parser.add_argument("--out", default="out/demo", help="output folder")
     parser.add_argument("--trials", type=positive_int, default=50, help="placements per lighting")
     parser.add_argument("--seed", type=int, default=1)

@@ -3,7 +3,8 @@
 Acquire the NN1 and NN2 grids once on the default scene in good light, train every system on
 them, then position (and grasp) the same random placements with each system in good and in poor
 light. Writes DIR/table1.md, DIR/table1.json (one `finepos evaluate --json` report per system
-and lighting) and DIR/convergence-<lighting>.png.
+and lighting) and DIR/convergence-<lighting>.png. --part NAME: with that part on the table
+(default: the scene's).
 
 Example: finepos table1 --trials 100 --seed 1 --out out/table1
 """
@@ -16,11 +17,13 @@ import sys
 
 from controller.commands.common import (
     add_config_file_option,
+    add_part_option,
     add_timing_option,
     config_from_args,
     positive_int,
     with_timing,
 )
+from controller.config import with_part
 from controller.evaluation.comparison.table1 import LIGHTINGS, TABLE1_SYSTEMS, run_table1
 from controller.evaluation.comparison.table1_report import table1_markdown, write_table1
 
@@ -28,6 +31,8 @@ from controller.evaluation.comparison.table1_report import table1_markdown, writ
 def run(args) -> int:
     """Run Table 1, write its files to ``--out`` and print the Markdown table."""
     config = with_timing(config_from_args(args), args.timing)
+    if args.part is not None:
+        config = with_part(config, args.part)
     result = run_table1(config, trials=args.trials, seed=args.seed, workers=args.workers,
                         systems=TABLE1_SYSTEMS, lightings=LIGHTINGS, grasp=not args.no_grasp,
                         progress=not args.quiet)
@@ -41,6 +46,7 @@ def run(args) -> int:
 def add_arguments(parser: argparse.ArgumentParser) -> None:
     """The options of ``finepos table1``."""
     add_config_file_option(parser)
+    add_part_option(parser, "the scene's, scene.object.kind")
     parser.add_argument("--out", required=True, metavar="DIR", help="output folder")
     parser.add_argument("--trials", type=positive_int, default=100,
                         help="placements per system and lighting")

@@ -1,16 +1,23 @@
-"""``finepos teach | acquire | train | position | grasp``: the cell's workflow, step by step."""
+"""``finepos teach | acquire | train | position | grasp``: the cell's workflow, step by step.
+
+Each works on one part (``--part``, see ``common.part_setup``), in that part's folder under the
+state folder (``controller.teach.state_folder``).
+"""
 
 from __future__ import annotations
 
 from controller.commands.common import (
+    TAUGHT_PART_HELP,
     add_command,
     add_config_option,
     add_log_option,
+    add_part_option,
     add_record_option,
     config_from_args,
     iteration_log,
     loop_budget,
     parse_triple,
+    part_setup,
     run_recorder,
 )
 from controller.commands.device_options import add_device_options, apply_device_options
@@ -25,18 +32,15 @@ from drivers.core.pose import ToolStep
 _SPACENAV_ONLY = ("start_offset", "spnav_socket", "timeout_s")
 
 
-def _config(args):
-    """The config file's settings with the command line's device options applied."""
-    return apply_device_options(config_from_args(args), args)
-
-
-def _positioner(args, devices, config, log=None) -> FinePositioner:
-    return FinePositioner(devices, config, log=log, state_dir=args.state_dir)
+def _config(args, teach: bool = False):
+    """The config file's settings with the command line's device options applied, set up for
+    the command's part, and that part's state folder (``common.part_setup``)."""
+    return part_setup(args, apply_device_options(config_from_args(args), args), teach=teach)
 
 
 def cmd_teach(args) -> int:
     """Record the nominal pose (auto, spacenav or current); 1 when a spacenav teach-in aborts."""
-    config = _config(args)
+    config, state_dir = _config(args, teach=True)
     given = [f"--{name.replace('_', '-')}" for name in _SPACENAV_ONLY
              if getattr(args, name) is not None]
     if given and args.device != "spacenav":
@@ -44,7 +48,7 @@ def cmd_teach(args) -> int:
     start_offset = parse_triple(args.start_offset, "--start-offset") if args.start_offset \
         else None
     with open_devices(config) as devices:
-        fp = _positioner(args, devices, config)
+        fp = FinePositioner(devices, config, state_dir=state_dir)
         if args.auto:
             state = fp.teach_auto()
         elif args.device == "spacenav":
@@ -54,24 +58,25 @@ def cmd_teach(args) -> int:
                     grasp_depth_mm=args.grasp_depth_mm, object_width_mm=args.object_width_mm,
                     timeout_s=args.timeout_s)
             except TeachAborted as exc:
-                write_json(None, {"state_file": str(fp.state_path), "aborted": True,
+                write_json(None, {"part": config.controller.part,
+                                  "state_file": str(fp.state_path), "aborted": True,
                                   "reason": str(exc)})
                 return 1
         else:
             state = fp.teach("current", args.grasp_depth_mm, args.object_width_mm)
-    write_json(None, {"state_file": str(fp.state_path), "nominal_pose":
-                      state.nominal_pose.as_dict(), "object": state.object_kind,
+    write_json(None, {"part": state.object_kind, "state_file": str(fp.state_path),
+                      "nominal_pose": state.nominal_pose.as_dict(), "object": state.object_kind,
                       "kappa": state.kappa, "source": state.source})
     return 0
 
 
 def cmd_acquire(args) -> int:
     """Take the ``--set`` dataset around the taught pose and print where it is stored."""
-    config = _config(args)
+    config, state_dir = _config(args)
     with open_devices(config) as devices:
-        fp = _positioner(args, devices, config)
+        fp = FinePositioner(devices, config, state_dir=state_dir)
         data = fp.acquire(args.set, seed=args.seed)
-    write_json(None, {"set": args.set, "images": len(data),
+    write_json(None, {"part": config.controller.part, "set": args.set, "images": len(data),
                       "file": str(fp.dataset_path(args.set)),
                       "seconds": data.metadata.get("seconds")})
     return 0
@@ -79,10 +84,11 @@ def cmd_acquire(args) -> int:
 
 def cmd_train(args) -> int:
     """Train ``--system`` from the nn1 and nn2 datasets and print the model file."""
-    config = config_from_args(args)
-    fp = FinePositioner(None, config, state_dir=args.state_dir)
+    config, state_dir = part_setup(args, config_from_args(args))
+    fp = FinePositioner(None, config, state_dir=state_dir)
     model = fp.train(args.system)
-    write_json(None, {"system": args.system, "model": str(fp.model_path(args.system)),
+    write_json(None, {"part": config.controller.part, "system": args.system,
+                      "model": str(fp.model_path(args.system)),
                       "train_images": model.train_images,
                       "train_seconds": round(model.train_seconds, 3)})
     return 0
@@ -93,10 +99,10 @@ def cmd_position(args) -> int:
 
     The model is loaded before the iteration log and the recording are created: a run that
     cannot start leaves no files."""
-    config = _config(args)
+    config, state_dir = _config(args)
     offset = parse_triple(args.offset, "--offset") if args.offset is not None else None
     with open_devices(config) as devices:
-        fp = _positioner(args, devices, config)
+        fp = FinePositioner(devices, config, state_dir=state_dir)
         fp.load_model(args.model, args.system)
         with iteration_log(args, config) as log, run_recorder(args) as recorder:
             fp.log, fp.recorder = log, recorder
@@ -114,7 +120,8 @@ def _position_run(args, fp: FinePositioner, offset) -> dict:
         fp.move_to(fp.state().nominal_pose.moved_in_tool_frame(
             ToolStep(-dx, -dy, 0.0, -dphi)))
     result = fp.position(args.max_loops)
-    report = {"run_id": result.run_id, "outcome": result.outcome, "reason": result.reason,
+    report = {"part": fp.config.controller.part, "run_id": result.run_id,
+              "outcome": result.outcome, "reason": result.reason,
               "loops": result.loops, "iterations": result.iterations,
               "error": result.states[-1].error, "log": str(fp.log.path)}
     if args.record:
@@ -127,12 +134,11 @@ def _position_run(args, fp: FinePositioner, offset) -> dict:
 
 def cmd_grasp(args) -> int:
     """Run the force-guarded grasp from the current pose; 1 when it failed."""
-    config = _config(args)
+    config, state_dir = _config(args)
     with open_devices(config) as devices, run_recorder(args) as recorder:
-        fp = _positioner(args, devices, config)
-        fp.recorder = recorder
+        fp = FinePositioner(devices, config, state_dir=state_dir, recorder=recorder)
         result = fp.grasp()
-    write_json(None, result.as_dict())
+    write_json(None, {"part": config.controller.part, **result.as_dict()})
     return 0 if result.success else 1
 
 
@@ -146,9 +152,14 @@ def register(subparsers) -> None:
                     "pose; --device spacenav: jog with the 3D mouse through spacenavd "
                     "(controller.teach: button 0 records, button 1 aborts and writes nothing, "
                     "exit status 1); otherwise the arm's current pose is recorded.\n\n"
-                    "Example: finepos teach --device spacenav --start-offset 4,-3,5")
+                    "Example: finepos teach --device spacenav --start-offset 4,-3,5\n\n"
+                    "Each part is taught into its own folder under the state folder "
+                    "(state/<part>/cell.json); --part NAME teaches that part (on the simulated "
+                    "cell it is put on the table first).\n\n"
+                    "Example: finepos teach --auto --part nut")
     add_config_option(p)
     add_device_options(p)
+    add_part_option(p, "the cell's: the simulated table's, or controller.part")
     how = p.add_mutually_exclusive_group()
     how.add_argument("--auto", action="store_true", help="simulated cell: the true pose")
     how.add_argument("--device", choices=["spacenav"], help="jog with a 3D mouse")
@@ -172,9 +183,11 @@ def register(subparsers) -> None:
         help="take the training or test images around the taught pose",
         description="Example: finepos acquire --set nn1\n\nDrive the grid of displacements "
                     "(nn1: a = 25 mm, nn2: a = 5 mm, b = 180/kappa deg, 3x3x7) or a random "
-                    "test set, and store the dataset under the state folder.")
+                    "test set, and store the dataset in the part's state folder "
+                    "(state/<part>/datasets/<set>.npz).")
     add_config_option(p)
     add_device_options(p)
+    add_part_option(p, TAUGHT_PART_HELP)
     p.add_argument("--set", required=True, choices=DATASETS)
     p.add_argument("--seed", type=int, default=0, help="seed of the random test set")
     p.set_defaults(func=cmd_acquire)
@@ -183,8 +196,9 @@ def register(subparsers) -> None:
         subparsers, "train",
         help="train NN1 and NN2 into a model bundle",
         description="Example: finepos train\n\nTrain the system from the nn1 and nn2 "
-                    "datasets into state/model-<system>.")
+                    "datasets into the part's state folder (state/<part>/model-<system>...).")
     add_config_option(p)
+    add_part_option(p, TAUGHT_PART_HELP)
     p.add_argument("--system", default="gabor", choices=sorted(SYSTEMS))
     p.set_defaults(func=cmd_train)
 
@@ -202,6 +216,7 @@ def register(subparsers) -> None:
     add_device_options(p)
     add_log_option(p)
     add_record_option(p)
+    add_part_option(p, TAUGHT_PART_HELP)
     p.add_argument("--system", default="gabor", choices=sorted(SYSTEMS))
     p.add_argument("--model", metavar="FILE", help="model file (default: the state folder's)")
     p.add_argument("--offset", metavar="DX,DY,DPHI",
@@ -219,4 +234,5 @@ def register(subparsers) -> None:
     add_config_option(p)
     add_device_options(p)
     add_record_option(p)
+    add_part_option(p, TAUGHT_PART_HELP)
     p.set_defaults(func=cmd_grasp)

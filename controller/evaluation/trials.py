@@ -52,9 +52,12 @@ def with_lighting(config, preset: str | None):
 
 def default_scene_config(config):
     """The config with every scene setting at its default (where training happens), except
-    the camera: it belongs to the cell (``scene.camera``, at its ``mount``), and the timing."""
-    return dataclasses.replace(config, scene=type(config.scene)(camera=config.scene.camera,
-                                                                timing=config.scene.timing))
+    the part (``scene.object.kind``: the default scene with that part on it), the camera (it
+    belongs to the cell: ``scene.camera``, at its ``mount``) and the timing."""
+    scene = config.scene
+    obj = type(scene.object)(kind=scene.object.kind)
+    return dataclasses.replace(config, scene=type(scene)(object=obj, camera=scene.camera,
+                                                         timing=scene.timing))
 
 
 def with_test_camera(config):
@@ -213,6 +216,10 @@ def evaluate(system: str, config, *, trials: int, seed: int, lighting: str | Non
         work = Path(work_dir or tmp)
         if model_path is not None:
             model = SYSTEMS[system].load(model_path)
+            taught = getattr(model.model, "object_kind", None)
+            if taught is not None and taught != cell_kind(config):
+                raise FineposError(f"{model_path}: taught on the {taught}, not the "
+                                   f"{cell_kind(config)} (name the part with --part)")
             acquisition = {"acquire_seconds": None, "images": model.train_images}
         else:
             model, acquisition = train_on_default_scene(system, config, work / "train", seed,

@@ -21,21 +21,30 @@ Commands (arguments, types, ranges and defaults in ``commands.COMMANDS``):
 
 - ``status``: state, since, reason, pid, uptime_s, job (running), last_job (with outcome,
   reason, result), pose (last read or reached, with its time), last_iteration (the latest
-  iteration record), model (system, file, train images), fault (code, reason, since, devices not
-  active, reconnected, reconnect_attempts), config (source, last_reload), iteration_log, clients;
+  iteration record), part (the part of the last job, else the cell's), model (that part's model
+  in use: system, file, train images), parts (every taught part: its state folder and its model
+  in use), fault (code, reason, since, devices not active, reconnected, reconnect_attempts),
+  config (source, last_reload), iteration_log, clients;
 - jobs, refused unless idle (``busy``, ``fault``, ``not_ready``, ``stopping``): ``teach``
   (``auto``: simulated cell only; otherwise the current pose, with the grasp geometry of
   ``controller.part`` unless ``grasp_depth_mm`` and ``object_width_mm`` are given),
   ``acquire`` (``set``: nn1 | nn2 | test, ``seed``),
   ``train`` (``system``), ``position`` (``max_loops``; ``offset`` [dx_mm, dy_mm, dphi_deg]:
-  simulated cell only), ``grasp``. Each takes ``wait``: false (default) answers when the job has
+  simulated cell only), ``grasp``. Each takes ``part`` (cube | nut | ledge | screw; default:
+  the one part taught, else the cell's; for ``teach`` the cell's: the simulated table's, or
+  ``controller.part``; refused as ``bad_request`` when several parts are taught and none is
+  named): the job works in that part's state folder with that part's model, and on the
+  simulated cell the part is put on the table first (the cell is built anew with it). Every
+  taught part's model stays loaded (one slot per part), so positioning another part loads
+  nothing. Each takes ``wait``: false (default) answers when the job has
   started, true when it has ended; the job's ``outcome`` is done, failed (the reason says why,
   e.g. ``no_object: ...`` or ``grasp failed: excessive force ...``), aborted, or fault;
 - ``abort``: preempts the running job (no further motion command is sent) and halts the arm;
   it answers once the halt was acknowledged or after ``service.abort_wait_s`` (then
   ``halt_error`` says the halt is still waiting, and a ``halt`` event reports its outcome);
-- ``reload``: loads the model of ``system`` from the state folder (a bad one is refused and
-  the old one stays in use);
+- ``reload``: loads the model of ``system`` (default: the one in use, else gabor) of ``part``
+  (default: every taught part with a trained model) from the state folder (a bad one is
+  refused and the old ones stay in use);
 - ``reset``: in fault, reconnects the devices that are not active, reads each device once and
   returns to idle; refused (``fault``) while the cause is still there;
 - ``stream``: answers once, then sends events, one per line, until the client disconnects:

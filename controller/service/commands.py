@@ -14,6 +14,7 @@ from typing import Any
 
 from controller.fine_positioner import DATASETS
 from controller.systems.registry import SYSTEMS
+from drivers.core.parts import PARTS
 
 REQUIRED = object()
 
@@ -35,34 +36,43 @@ class Arg:
 
 
 WAIT = Arg(bool, False, help="answer when the job ended (default: when it started)")
+PART = Arg(str, None, choices=tuple(PARTS),
+           help="the part (default: the one taught, else the cell's; teach: the cell's); on "
+                "the simulated cell it is put on the table")
 
 COMMANDS: dict[str, dict[str, Arg]] = {
     "status": {},
     "teach": {
+        "part": PART,
         "auto": Arg(bool, False, help="simulated cell: place the gripper at the true pose"),
         "grasp_depth_mm": Arg(float, None, 0.0, 500.0, help="descent from the pose to grip"),
         "object_width_mm": Arg(float, None, 0.0, 300.0, help="finger width holding the part"),
         "wait": WAIT,
     },
     "acquire": {
+        "part": PART,
         "set": Arg(str, REQUIRED, choices=DATASETS, help="which dataset"),
         "seed": Arg(int, 0, 0, 2**31 - 1, help="seed of the random test set"),
         "wait": WAIT,
     },
     "train": {
+        "part": PART,
         "system": Arg(str, "gabor", choices=tuple(SYSTEMS), help="vision system"),
         "wait": WAIT,
     },
     "position": {
+        "part": PART,
         "max_loops": Arg(float, None, 0.5, 1000.0, help="loop budget (default from config)"),
         "offset": Arg(list, None, items=((-50.0, 50.0), (-50.0, 50.0), (-180.0, 180.0)),
                       help="simulated cell: first displace the arm from the taught pose by "
                            "[dx_mm, dy_mm, dphi_deg]"),
         "wait": WAIT,
     },
-    "grasp": {"wait": WAIT},
+    "grasp": {"part": PART, "wait": WAIT},
     "abort": {},
     "reload": {
+        "part": Arg(str, None, choices=tuple(PARTS),
+                    help="whose model to load (default: every taught part's)"),
         "system": Arg(str, None, choices=tuple(SYSTEMS),
                       help="model to load (default: the one in use, else gabor)"),
     },

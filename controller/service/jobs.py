@@ -83,33 +83,41 @@ class Job:
 
 @dataclass(frozen=True)
 class JobContext:
-    """What a job body gets: the FinePositioner, the validated arguments, the model slot."""
+    """What a job body gets: the FinePositioner of the job's part (its config and state folder
+    set up for that part), the validated arguments (``part`` resolved), that part's model
+    slot."""
 
     fp: FinePositioner
     args: dict[str, Any]
     models: ModelSlot
+
+    @property
+    def part(self) -> str:
+        """The part the job works on."""
+        return self.fp.config.controller.part
 
 
 def _teach(ctx: JobContext) -> dict[str, Any]:
     fp, args = ctx.fp, ctx.args
     state = (fp.teach_auto() if args["auto"] else
              fp.teach("current", args["grasp_depth_mm"], args["object_width_mm"]))
-    return {"state_file": str(fp.state_path), "nominal_pose": state.nominal_pose.as_dict(),
+    return {"part": ctx.part, "state_file": str(fp.state_path),
+            "nominal_pose": state.nominal_pose.as_dict(),
             "object": state.object_kind, "kappa": state.kappa, "source": state.source}
 
 
 def _acquire(ctx: JobContext) -> dict[str, Any]:
     name = ctx.args["set"]
     data = ctx.fp.acquire(name, seed=ctx.args["seed"], progress=False)
-    return {"set": name, "images": len(data), "file": str(ctx.fp.dataset_path(name)),
-            "seconds": data.metadata.get("seconds")}
+    return {"part": ctx.part, "set": name, "images": len(data),
+            "file": str(ctx.fp.dataset_path(name)), "seconds": data.metadata.get("seconds")}
 
 
 def _train(ctx: JobContext) -> dict[str, Any]:
     system = ctx.args["system"]
     model = ctx.fp.train(system)
     ctx.models.set(model, ctx.fp.model_path(system))
-    return {"system": system, "model": str(ctx.fp.model_path(system)),
+    return {"part": ctx.part, "system": system, "model": str(ctx.fp.model_path(system)),
             "train_images": model.train_images, "train_seconds": model.train_seconds}
 
 
@@ -121,8 +129,8 @@ def _position(ctx: JobContext) -> dict[str, Any]:
         fp.move_to(fp.state().nominal_pose.moved_in_tool_frame(ToolStep(-dx, -dy, 0.0, -dphi)))
     result = fp.position(args["max_loops"])
     error = result.states[-1].error
-    report = {"run_id": result.run_id, "outcome": result.outcome, "reason": result.reason,
-              "loops": result.loops, "iterations": result.iterations,
+    report = {"part": ctx.part, "run_id": result.run_id, "outcome": result.outcome,
+              "reason": result.reason, "loops": result.loops, "iterations": result.iterations,
               "error": list(error) if error is not None else None}
     if not result.ok:
         raise JobFailed(f"{result.outcome}: {result.reason}", report)
@@ -131,9 +139,10 @@ def _position(ctx: JobContext) -> dict[str, Any]:
 
 def _grasp(ctx: JobContext) -> dict[str, Any]:
     result = ctx.fp.grasp()
+    report = {"part": ctx.part, **result.as_dict()}
     if not result.success:
-        raise JobFailed(f"grasp failed: {result.reason}", result.as_dict())
-    return result.as_dict()
+        raise JobFailed(f"grasp failed: {result.reason}", report)
+    return report
 
 
 BODIES: dict[str, Callable[[JobContext], dict[str, Any]]] = {

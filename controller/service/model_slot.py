@@ -1,4 +1,5 @@
-"""The model in use by the service's positioning jobs, and what ``status`` says about it."""
+"""The models in use by the service's positioning jobs, one slot per taught part, and what
+``status`` says about them."""
 
 from __future__ import annotations
 
@@ -14,7 +15,8 @@ DEFAULT_SYSTEM = "gabor"
 
 
 class ModelSlot:
-    """The model the positioning loop uses, and what status reports about it (thread-safe)."""
+    """The model the positioning loop uses for one part, and what status reports about it
+    (thread-safe)."""
 
     def __init__(self) -> None:
         self._lock = threading.Lock()
@@ -52,3 +54,28 @@ class ModelSlot:
     def require(self, fp: FinePositioner) -> TrainedModel:
         """The model in use, loading the default system's on first need."""
         return self._model or self.load(fp, DEFAULT_SYSTEM)
+
+
+class PartModels:
+    """One ModelSlot per part, each kept loaded once set (thread-safe): positioning another
+    part needs no reload."""
+
+    def __init__(self) -> None:
+        self._lock = threading.Lock()
+        self._slots: dict[str, ModelSlot] = {}
+
+    def slot(self, part: str) -> ModelSlot:
+        """The slot of ``part`` (a new, empty one the first time)."""
+        with self._lock:
+            return self._slots.setdefault(part, ModelSlot())
+
+    def info(self, part: str) -> dict[str, Any] | None:
+        """What ``status`` reports about ``part``'s model, or None without one."""
+        with self._lock:
+            slot = self._slots.get(part)
+        return slot.info() if slot is not None else None
+
+    def marker(self) -> tuple:
+        """An object that changes whenever any part's model is replaced."""
+        with self._lock:
+            return tuple((part, slot.marker()) for part, slot in self._slots.items())

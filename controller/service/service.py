@@ -27,8 +27,9 @@ from collections.abc import Callable
 from pathlib import Path
 from typing import Any
 
+from controller.config import cell_part, with_part
 from controller.devices import open_devices
-from controller.fine_positioner import DATASETS, FinePositioner
+from controller.fine_positioner import FinePositioner
 from controller.loop.iteration_log import IterationLog
 from controller.service.backoff import Backoff
 from controller.service.cell_connection import CellConnection, DeviceOpener
@@ -44,7 +45,7 @@ from controller.service.jobs import (
     is_disk_full,
 )
 from controller.service.listeners import read_token
-from controller.service.model_slot import DEFAULT_SYSTEM, ModelSlot
+from controller.service.model_slot import DEFAULT_SYSTEM, PartModels
 from controller.service.peer import PeerPolicy
 from controller.service.protocol import EncodedResult, Request, RequestError
 from controller.service.sd_notify import Notifier
@@ -52,6 +53,7 @@ from controller.service.server import ControlServer
 from controller.service.snapshot import StatusSnapshot
 from controller.service.states import JOB_STATES, State, StateMachine
 from controller.service.watchdog import WatchdogPinger
+from controller.teach.state_folder import StateFolder
 from drivers.core.errors import ConfigError, FineposError
 from drivers.core.files import has_room, remove_stale_temp_files
 from drivers.core.typed_config import to_mapping
@@ -78,7 +80,8 @@ class Service:
         self._machine = StateMachine(self._on_transition)
         self._cell = CellConnection(config, opener)
         self._hub = EventHub()
-        self._models = ModelSlot()
+        self._models = PartModels()
+        self._part = cell_part(config)  # the part of the positioner in use (self._fp)
         self._stop = threading.Event()
         self._wake = threading.Event()
         self._reload = threading.Event()
@@ -131,7 +134,8 @@ class Service:
                 ControlServer(self.socket_path, cfg.service, policy, self, token))
             stack.callback(lambda: self._server.close(self._stop_budget_s(0.6)))
             stack.callback(self._stop_job)
-            self._fp = FinePositioner(None, cfg, log=self._log)
+            self._fp = FinePositioner(None, with_part(cfg, self._part), log=self._log,
+                                      state_dir=self._folder().part_dir(self._part))
             self._open_devices()
             self._start_up_check()
             self.serving.set()
@@ -157,10 +161,7 @@ class Service:
 
     def _remove_stale_temp_files(self) -> None:
         """Remove what interrupted atomic writes (a kill during train or acquire) left behind."""
-        paths = self.config.controller.paths
-        probe = FinePositioner(None, self.config)
-        folders = {Path(paths.state_dir), Path(paths.log_dir),
-                   *(probe.dataset_path(name).parent for name in DATASETS)}
+        folders = [*self._folder().folders(), Path(self.config.controller.paths.log_dir)]
         for folder in folders:
             remove_stale_temp_files(folder)
 
@@ -199,14 +200,31 @@ class Service:
             with self._machine.lock:
                 self._enter_fault(f"self-check at start: {result.message}", "self_check")
 
+    def _folder(self, config=None) -> StateFolder:
+        """The state folder (``config``: default the service's), one sub-folder per part."""
+        config = config or self.config
+        return StateFolder(config.controller.paths.state_dir, cell_part(config))
+
+    def _positioner(self, part: str, config=None) -> FinePositioner:
+        """A FinePositioner for ``part`` on the opened devices (``config``: default the
+        service's), with the config set up for that part and the part's state folder."""
+        config = config or self.config
+        return FinePositioner(self._cell.job_devices() if self._cell.is_open else None,
+                              with_part(config, part), log=self._log,
+                              state_dir=self._folder(config).part_dir(part))
+
     def _attach_devices(self) -> None:
-        """Give the positioner the opened devices and load the model found in the state folder."""
-        self._fp = FinePositioner(self._cell.job_devices(), self.config, log=self._log)
-        if self._models.model is None and self._fp.model_path(DEFAULT_SYSTEM).exists():
-            try:
-                self._models.load(self._fp, DEFAULT_SYSTEM)
-            except (FineposError, OSError) as exc:
-                logger.warning("no model in use: %s", exc)
+        """Give the positioner the opened devices and load the model of every taught part
+        found in the state folder."""
+        self._fp = self._positioner(self._part)
+        for part in self._folder().taught():
+            fp = self._fp if part == self._part else self._positioner(part)
+            slot = self._models.slot(part)
+            if slot.model is None and fp.model_path(DEFAULT_SYSTEM).exists():
+                try:
+                    slot.load(fp, DEFAULT_SYSTEM)
+                except (FineposError, OSError) as exc:
+                    logger.warning("no %s model in use: %s", part, exc)
 
     def _stop_job(self) -> None:
         """Abort the running job and wait up to service.stop_timeout_s for it to end."""
@@ -325,8 +343,7 @@ class Service:
             if self._job is not None or self._machine.state in (State.STARTING, State.STOPPING):
                 return  # retried once the job has ended
             self._reload.clear()
-            old = self.config
-            system = (self._models.info() or {}).get("system")
+            old, part = self.config, self._part
         try:
             new = self._reload_config() if self._reload_config is not None else old
             changed = restart_only_changes(old, new)
@@ -334,9 +351,8 @@ class Service:
                 raise ConfigError(f"{', '.join(changed)} changed: that needs a restart "
                                   "(systemctl restart finepos)")
             policy = PeerPolicy.from_config(new.service.allowed_users, new.service.allowed_groups)
-            fp = FinePositioner(self._cell.job_devices() if self._cell.is_open else None, new,
-                                log=self._log)
-            model = fp.load_model(system=system) if system is not None else None
+            fp = self._positioner(part, new)
+            models = self._load_models(self._folder(new).taught(), None, new)
         except Exception as exc:  # noqa: BLE001 - whatever the file holds, the old config stays
             detail = str(exc) if isinstance(exc, (FineposError, OSError)) else \
                 f"{type(exc).__name__}: {exc}"
@@ -348,13 +364,14 @@ class Service:
                 return
             self.config = new
             self._fp = fp
-            if model is not None and system is not None:
-                self._models.set(model, fp.model_path(system))
+            for kind, (model, path) in models.items():
+                self._models.slot(kind).set(model, path)
             if self._cell.arm is not None:
                 self._cell.arm.inner.limits = new.safety
             if self._server is not None:
                 self._server.policy = policy
-        self._reloaded(True, f"config {new.source} and model {system or '(none)'} reloaded")
+        loaded = ", ".join(f"{kind} {model.system}" for kind, (model, _) in models.items())
+        self._reloaded(True, f"config {new.source} and models {loaded or '(none)'} reloaded")
 
     def _reloaded(self, ok: bool, message: str) -> None:
         self._last_reload = {"ok": ok, "message": message, "at": time.time()}
@@ -394,7 +411,7 @@ class Service:
             "status": self.status,
             "abort": self.abort,
             "reset": self.reset,
-            "reload": lambda: self.reload_model(request.args["system"]),
+            "reload": lambda: self.reload_model(request.args["system"], request.args["part"]),
         }
         if request.cmd not in handlers:
             raise RequestError("bad_request", f"{request.cmd} is not a command on this connection")
@@ -412,7 +429,7 @@ class Service:
         return (self._machine.snapshot(), job, job is not None and job.done.is_set(),
                 self._last_job, arm.last_pose() if arm is not None else None,
                 self._last_iteration, self._fault, self._reconnected, self._backoff.attempts,
-                self._models.marker(), self._last_reload, self.config, self._log,
+                self._models.marker(), self._part, self._last_reload, self.config, self._log,
                 self._server.client_count if self._server is not None else 0)
 
     def _build_status(self) -> dict[str, Any]:
@@ -431,12 +448,23 @@ class Service:
                 "last_job": self._last_job,
                 "pose": {**seen[0].as_dict(), "at": seen[1]} if seen is not None else None,
                 "last_iteration": self._last_iteration,
-                "model": self._models.info(),
+                "part": self._part,
+                "model": self._models.info(self._part),
+                "parts": self._parts_status(),
                 "fault": fault,
                 "config": {"source": self.config.source, "last_reload": self._last_reload},
                 "iteration_log": str(self._log.path) if self._log is not None else None,
                 "clients": self._server.client_count if self._server is not None else 0,
             }
+
+    def _parts_status(self) -> dict[str, Any]:
+        """Per taught part: its state folder and its model in use (None: none loaded)."""
+        try:
+            taught = self._folder().taught()
+        except OSError as exc:  # an unreadable state folder: reported, never raised
+            return {"error": f"{type(exc).__name__}: {exc}"}
+        return {kind: {"state_dir": str(folder), "model": self._models.info(kind)}
+                for kind, folder in taught.items()}
 
     def _refusal(self, state: State) -> RequestError:
         if state is State.FAULT:
@@ -457,20 +485,33 @@ class Service:
             raise RequestError("bad_request", "offset places the simulated arm; on a real cell "
                                               "the loop starts where the arm is")
 
+    def _job_part(self, kind: str, requested: str | None) -> str:
+        """The part a job works on: ``requested``; else for ``teach`` the cell's (the simulated
+        table's, or controller.part), for the others the one taught (the cell's when none is).
+        Raises RequestError ``bad_request`` when several parts are taught and none is named."""
+        cell = self._cell.cell
+        default = cell.object_kind if cell is not None else self.config.controller.part
+        if kind == "teach":
+            return requested or default
+        try:
+            return self._folder().resolve(requested, default)
+        except ConfigError as exc:
+            raise RequestError("bad_request", str(exc)) from exc
+
     def _start_job(self, kind: str, args: dict[str, Any]) -> dict[str, Any]:
         with self._machine.lock:
             state = self._machine.state
             if state is not State.IDLE:
                 raise self._refusal(state)
             self._check_job_args(kind, args)
+            args = {**args, "part": self._job_part(kind, args["part"])}
             job = Job(self._next_job_id, kind, args)
             self._next_job_id += 1
-            fp = self._fp
-            assert fp is not None and self._cell.arm is not None
+            assert self._cell.arm is not None
             self._cell.arm.resume()
             self._job = job
             self._machine.transition(JOB_STATES[kind], f"job {job.id}: {kind}")
-            self._job_thread = threading.Thread(target=self._run_job, args=(job, fp),
+            self._job_thread = threading.Thread(target=self._run_job, args=(job,),
                                                 name=f"job-{job.id}-{kind}", daemon=True)
             self._job_thread.start()
         if args["wait"]:
@@ -520,12 +561,35 @@ class Service:
                     except OSError as exc:
                         logger.warning("job %d: recording not finished: %s", job.id, exc)
 
-    def _run_job(self, job: Job, fp: FinePositioner) -> None:
+    def _job_positioner(self, job: Job) -> FinePositioner:
+        """The positioner of the job's part (device lock held): on the simulated cell that part
+        is put on the table first (the cell is built anew with it)."""
+        part = job.args["part"]
+        cell = self._cell.cell
+        if cell is not None and cell.object_kind != part:
+            logger.info("job %d: the simulated cell is built anew with the %s on the table",
+                        job.id, part)
+            with self._machine.lock:
+                self._fp = None  # an abort meanwhile halts the arm directly
+            self._cell.close()
+            self._cell.config = with_part(self.config, part)
+            self._cell.open()
+            if job.abort.is_set():
+                raise FineposError("aborted before the job started")
+        with self._machine.lock:
+            if self._fp is None or self._part != part or self._fp.devices is None:
+                self._part, self._fp = part, self._positioner(part)
+            return self._fp
+
+    def _run_job(self, job: Job) -> None:
         exc: Exception | None = None
         result = None
         try:
-            with self._device_lock, self._job_recording(job, fp):
-                result = BODIES[job.kind](JobContext(fp, job.args, self._models))
+            with self._device_lock:
+                fp = self._job_positioner(job)
+                with self._job_recording(job, fp):
+                    result = BODIES[job.kind](JobContext(fp, job.args,
+                                                         self._models.slot(job.args["part"])))
         except JobFailed as failed:
             exc, result = failed, failed.result
         except Exception as error:  # classified below: every way a job can end is reported
@@ -641,19 +705,40 @@ class Service:
                 state = self._machine.state
         return {"state": state.value, "reset": "devices checked"}
 
-    def reload_model(self, system: str | None) -> dict[str, Any]:
-        """Load a model from the state folder into use; a bad one leaves the old in use."""
+    def _load_models(self, part_names, system: str | None, config=None,
+                     skip_untrained: bool = True) -> dict[str, tuple]:
+        """Load the model of each part in ``part_names`` from its state folder: ``system``,
+        else the one in use for that part, else gabor. With ``skip_untrained``, a part with
+        no model in use and no such file (taught, not trained yet) is left out. Returns
+        {part: (model, file)}; raises the first error, having put nothing into use."""
+        loaded = {}
+        for kind in part_names:
+            in_use = (self._models.info(kind) or {}).get("system")
+            chosen = system or in_use or DEFAULT_SYSTEM
+            fp = self._positioner(kind, config)
+            if skip_untrained and in_use is None and not fp.model_path(chosen).exists():
+                continue
+            loaded[kind] = (fp.load_model(system=chosen), fp.model_path(chosen))
+        return loaded
+
+    def reload_model(self, system: str | None, part: str | None = None) -> dict[str, Any]:
+        """Load the model of ``part`` (None: of every taught part) from the state folder into
+        use; if any cannot be loaded, every old one stays in use."""
         with self._machine.lock:
             state = self._machine.state
             if state not in (State.IDLE, State.FAULT):
                 raise self._refusal(state)
-            fp = self._fp
-            system = system or (self._models.info() or {}).get("system") or DEFAULT_SYSTEM
-        assert fp is not None
+        part_names = [part] if part is not None else list(self._folder().taught())
         try:
-            self._models.load(fp, system)
+            models = self._load_models(part_names, system, skip_untrained=part is None)
         except (FineposError, OSError) as exc:
             raise RequestError("failed", f"model not loaded, the old one stays in use: "
                                          f"{exc}") from exc
-        logger.info("model reloaded: %s", self._models.info())
-        return {"model": self._models.info()}
+        if not models:
+            raise RequestError("failed", "no taught part has a trained model yet: nothing to "
+                                         "load")
+        for kind, (model, path) in models.items():
+            self._models.slot(kind).set(model, path)
+        logger.info("models reloaded: %s", {kind: self._models.info(kind) for kind in models})
+        return {"model": self._models.info(self._part),
+                "models": {kind: self._models.info(kind) for kind in models}}

@@ -226,6 +226,24 @@ def cube_model_files(tmp_path_factory) -> Path:
     return folder
 
 
+@pytest.fixture(scope="session")
+def two_part_model_files(tmp_path_factory, cube_model_files) -> Path:
+    """A state folder with two parts in their own folders: ``cube/`` (``cube_model_files``)
+    and ``nut/``, taught at the same pose on the same synthetic view (a fake cell shows one
+    part for both) with a model of its own (kappa 6: grid angles within +/-30 deg)."""
+    folder = tmp_path_factory.mktemp("two-parts")
+    shutil.copytree(cube_model_files, folder / "cube")
+    cell, rng = SyntheticCell(), np.random.default_rng(1)
+    nn1 = render_dataset(cell, grid_offsets(25.0, 30.0, (3, 3, 3)), rng)
+    nn2 = render_dataset(cell, grid_offsets(5.0, 30.0, (3, 3, 3)), rng)
+    bundle = train_bundle(nn1, nn2, object_kind="nut", kappa=6,
+                          nominal_pose=NOMINAL.as_dict(), nn1_epochs=50, nn2_epochs=50)
+    (folder / "nut").mkdir()
+    bundle.save(folder / "nut" / "model-gabor.fpm")
+    CellState(NOMINAL, "nut", 6, 5.0, 24.0, "test", 0.0).save(folder / "nut" / "cell.json")
+    return folder
+
+
 def copy_state(source: Path, config) -> Path:
     target = Path(config.controller.paths.state_dir)
     shutil.copytree(source, target)

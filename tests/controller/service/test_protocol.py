@@ -27,10 +27,12 @@ def parse(text: str):
 def test_a_valid_request_gets_its_defaults():
     request = parse('{"cmd": "acquire", "args": {"set": "nn2"}, "id": "a"}')
     assert (request.cmd, request.args, request.id) == \
-        ("acquire", {"set": "nn2", "seed": 0, "wait": False}, "a")
+        ("acquire", {"part": None, "set": "nn2", "seed": 0, "wait": False}, "a")
     assert parse('{"cmd": "status"}').args == {}
     assert parse('{"cmd": "position", "args": {"offset": [1, -2.5, 30]}}').args == \
-        {"max_loops": None, "offset": [1.0, -2.5, 30.0], "wait": False}
+        {"part": None, "max_loops": None, "offset": [1.0, -2.5, 30.0], "wait": False}
+    assert parse('{"cmd": "grasp", "args": {"part": "nut"}}').args == {"part": "nut",
+                                                                        "wait": False}
 
 
 @pytest.mark.parametrize(("text", "code", "message"), [
@@ -53,6 +55,8 @@ def test_a_valid_request_gets_its_defaults():
      "offset[2]: must be within [-180, 180], got 181"),
     ('{"cmd": "train", "args": {"system": "svm"}}', "bad_request",
      "system: one of gabor, pca, hough, got 'svm'"),
+    ('{"cmd": "position", "args": {"part": "bolt"}}', "bad_request",
+     "part: one of cube, nut, ledge, screw, got 'bolt'"),
 ])
 def test_bad_requests_are_refused_with_a_code_and_the_reason(text, code, message):
     with pytest.raises(RequestError) as refused:
@@ -62,6 +66,7 @@ def test_bad_requests_are_refused_with_a_code_and_the_reason(text, code, message
 
 def test_every_job_command_can_wait_and_every_argument_has_help():
     assert all("wait" in COMMANDS[cmd] for cmd in JOB_COMMANDS)
+    assert all("part" in COMMANDS[cmd] for cmd in JOB_COMMANDS)
     assert all(spec.help for specs in COMMANDS.values() for spec in specs.values())
     with pytest.raises(ValueError, match="wait: expected true or false"):
         validate_args("grasp", {"wait": 1})

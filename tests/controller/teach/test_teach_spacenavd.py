@@ -115,7 +115,7 @@ def test_teach_command_jogs_from_the_start_offset_and_records(tmp_path, mouse_an
                                                               capsys):
     mouse, daemon = mouse_and_daemon
     assert main(["teach", "--auto", "--state-dir", str(tmp_path / "truth")]) == 0
-    truth = CellState.load(tmp_path / "truth" / "cell.json").nominal_pose
+    truth = CellState.load(tmp_path / "truth" / "cube" / "cell.json").nominal_pose
     offset = (3.0, 2.0, -4.0)
     needed = displaced(truth, offset).tool_step_to(truth)
     teach = load_config(None).controller.teach
@@ -126,10 +126,10 @@ def test_teach_command_jogs_from_the_start_offset_and_records(tmp_path, mouse_an
     capsys.readouterr()
     assert run_teach_command(argv, jog_script(needed, teach.jog) + click(0), mouse) == 0
     report = json.loads(capsys.readouterr().out)
-    stored = CellState.load(state_dir / "cell.json")
+    stored = CellState.load(state_dir / "cube" / "cell.json")  # the simulated cell's part
     distance_mm, angle_deg = pose_error(stored.nominal_pose, truth)
     assert report["source"] == "spacenav" and report["state_file"] == str(
-        state_dir / "cell.json")
+        state_dir / "cube" / "cell.json")
     assert distance_mm < POSITION_TOL_MM and angle_deg < ANGLE_TOL_DEG
 
 
@@ -142,4 +142,4 @@ def test_teach_command_abort_exits_1_and_writes_nothing(tmp_path, mouse_and_daem
                                     *click(1)], mouse) == 1
     report = json.loads(capsys.readouterr().out)
     assert report["aborted"] is True
-    assert not (tmp_path / "cell.json").exists()
+    assert not list(tmp_path.rglob("cell.json"))
