@@ -163,6 +163,55 @@ def grid_offsets(a_mm: float, b_deg: float, shape: tuple[int, int, int] = (3, 3,
     return np.stack([m.ravel() for m in mesh], axis=1)
 
 
+def staggered_grid_offsets(a_mm: float, b_deg: float,
+                           shape: tuple[int, int, int] = (3, 3, 7)) -> np.ndarray:
+    """A grid whose rotation levels are staggered over its positions: every (dx, dy) of the
+    grid has ``shape[2]`` rotations spaced 2 b / shape[2] apart, each position's set shifted
+    by another fraction of that spacing, so the nx * ny * nphi images show as many distinct
+    rotations, evenly spread over [-b_deg, b_deg] and never both ends (for b = 180/kappa the
+    ends are one and the same view of the part).
+
+    The plain grid (``grid_offsets``) repeats the same nphi rotations at every position; over
+    a whole symmetry period its two end levels show the same view, so a 3x3x7 grid holds six
+    distinct views: 60 deg apart for a part with no symmetry (kappa 1), too far apart for NN2
+    to interpolate. The staggered grid of the same 63 images holds 63 views, 360/63 deg
+    apart. Neighbouring positions get shifts far apart (rank m * s mod nx*ny, s near 0.618
+    of the count and coprime to it), so position and rotation stay uncorrelated.
+
+    Args:
+        a_mm: translations span [-a_mm, a_mm] on both axes (as ``grid_offsets``).
+        b_deg: rotations span [-b_deg, b_deg).
+        shape: number of values along (dx, dy, dphi); with one rotation value (or b = 0) the
+            grid is ``grid_offsets``'s.
+
+    Returns:
+        (nx * ny * nphi, 3) float64 labels, dx slowest and dphi fastest.
+
+    Raises:
+        DatasetError: a negative span or an axis with fewer than one value.
+    """
+    grid = grid_offsets(a_mm, b_deg, shape)
+    n_pos, n_phi = shape[0] * shape[1], shape[2]
+    if n_phi < 2 or b_deg == 0:
+        return grid
+    stride = _coprime_stride(n_pos)
+    rank = (np.arange(n_pos) * stride) % n_pos
+    shift = (rank + 0.5) / n_pos                                  # in (0, 1), one per position
+    level = np.arange(n_phi)
+    phi = -b_deg + 2.0 * b_deg * (level[None, :] + shift[:, None]) / n_phi
+    grid[:, 2] = phi.ravel()
+    return grid
+
+
+def _coprime_stride(n: int) -> int:
+    """The whole number nearest 0.618 n that is coprime to n (1 for n <= 2)."""
+    if n <= 2:
+        return 1
+    target = 0.618 * n
+    candidates = [s for s in range(1, n) if np.gcd(s, n) == 1]
+    return min(candidates, key=lambda s: abs(s - target))
+
+
 def random_offsets(rng: np.random.Generator, n: int, a_mm: float, b_deg: float) -> np.ndarray:
     """n labels drawn uniformly from [-a, a] x [-a, a] x [-b, b] (the paper's test sets).
 

@@ -48,6 +48,13 @@ from drivers.core.pose import Pose
 logger = logging.getLogger(__name__)
 
 NN1_HIDDEN = (3,)
+# The rotation-aware translation net, on (u, v, sin, cos of kappa dphi): the silhouette's
+# centre circles the grasp point as the part turns, which three tanh units cannot follow.
+# RMS x / y on 200 random test poses within 4 mm (simulated cell, good light), 3 -> 16 units:
+# screw 1.9 / 0.8 -> 0.16 / 0.15 mm, cube 0.15 / 0.15 -> 0.06 / 0.06 mm. In the loop (cube,
+# 40 trials, RMS x / y after 1.5 loops) 6 units 0.06 / 0.13 mm, 16 units 0.12 / 0.05 mm (it
+# fits the taught spot too closely), 10 units 0.06 / 0.08 mm.
+NN1_ROT_HIDDEN = (10,)
 NN2_HIDDEN = (12,)
 # Rprop steps. NN2 stops early: on 63 images more steps start to overfit (on synthetic
 # cubes 400 steps gave ~1.0 deg RMS on random test poses, 1500 steps ~1.2 deg).
@@ -57,8 +64,13 @@ NN2_EPOCHS = 1500
 NOMINAL_TOL_MM = 0.05
 NOMINAL_TOL_DEG = 0.05
 # L2 penalty on NN2's weights: 63 images cannot pin down 36 x 12 weights; without it NN2
-# reads ~0 for any rotation within a few degrees of a grid angle (see mlp.train_mlp).
-NN2_WEIGHT_DECAY = 1e-3
+# reads ~0 for any rotation within a few degrees of a grid angle (see mlp.train_mlp). With the
+# staggered grid, 1e-2 keeps NN2 from amplifying camera noise (RMS phi after 2.5 loops, 40
+# trials, 1e-3 -> 1e-2: nut 1.42 / 1.07 -> 0.72 / 0.66 deg, seeds 3 / 4; ledge 0.19 -> 0.12;
+# cube 0.29 / 0.33 -> 0.25 / 0.33; 3e-2 was worse: nut 0.93). A part without symmetry
+# (kappa 1) maps the whole circle and needs the looser fit: screw 1.01 -> 1.51 deg with 1e-2.
+NN2_WEIGHT_DECAY = 1e-2
+NN2_WEIGHT_DECAY_NO_SYMMETRY = 1e-3
 # A blob covering more of the image than this is the background, not the object.
 MAX_OBJECT_FRACTION = 0.5
 # Margin added to the relative half-range of the training areas (see prepare_training).
@@ -67,6 +79,11 @@ AREA_MARGIN = 0.2
 ELONGATION_MARGIN = 1.3
 # Otsu's threshold is computed on every OTSU_STRIDE-th pixel along each axis.
 OTSU_STRIDE = 2
+
+
+def default_nn2_weight_decay(kappa: int) -> float:
+    """NN2's default L2 penalty for a part of symmetry count ``kappa`` (see NN2_WEIGHT_DECAY)."""
+    return NN2_WEIGHT_DECAY_NO_SYMMETRY if kappa == 1 else NN2_WEIGHT_DECAY
 
 
 def _check_sets(sets: dict[str, Dataset]) -> tuple[int, int]:
@@ -279,7 +296,7 @@ def _summary(result: TrainedMLP) -> dict:
 
 def train_nn2(rois: np.ndarray | list[np.ndarray], dphi_deg: np.ndarray, kappa: int,
               gabor: GaborConfig, *, seed: int, hidden: tuple[int, ...] = NN2_HIDDEN,
-              epochs: int = NN2_EPOCHS, weight_decay: float = NN2_WEIGHT_DECAY) -> TrainedMLP:
+              epochs: int = NN2_EPOCHS, weight_decay: float | None = None) -> TrainedMLP:
     """NN2 as ``train_bundle`` trains it: ``gabor``'s features of the ROIs -> (sin, cos) of
     kappa dphi (Rprop, L2 penalty on the weights).
 
@@ -292,7 +309,8 @@ def train_nn2(rois: np.ndarray | list[np.ndarray], dphi_deg: np.ndarray, kappa: 
             (seed itself is NN1's).
         hidden: hidden layer sizes.
         epochs: Rprop steps (at most).
-        weight_decay: L2 penalty on the weights (0 = none).
+        weight_decay: L2 penalty on the weights (0 = none; None: the part's default,
+            ``default_nn2_weight_decay(kappa)``).
 
     Returns:
         The trained network, its loss curve and training time.
@@ -308,6 +326,8 @@ def train_nn2(rois: np.ndarray | list[np.ndarray], dphi_deg: np.ndarray, kappa: 
     bank = GaborBank(gabor)
     features = np.stack([bank.features(roi) for roi in rois])
     s, c = angles.encode(dphi_deg, kappa)
+    if weight_decay is None:
+        weight_decay = default_nn2_weight_decay(kappa)
     return train_mlp(features, np.stack([s, c], axis=1), tuple(hidden), seed=seed + 1,
                      epochs=epochs, weight_decay=weight_decay)
 
@@ -335,7 +355,7 @@ def train_bundle(nn1_data: Dataset, nn2_data: Dataset, *, object_kind: str, kapp
                  nn2_hidden: tuple[int, ...] = NN2_HIDDEN, seed: int = 0,
                  nn1_extra: Dataset | None = None, polarity: Polarity = "bright",
                  nn1_epochs: int = NN1_EPOCHS, nn2_epochs: int = NN2_EPOCHS,
-                 nn2_weight_decay: float = NN2_WEIGHT_DECAY,
+                 nn2_weight_decay: float | None = None,
                  localisation_channel: Channel | Literal["auto"] = "auto") -> ModelBundle:
     """Train NN1 and NN2 from image datasets and pack everything into a ModelBundle.
 
@@ -360,7 +380,8 @@ def train_bundle(nn1_data: Dataset, nn2_data: Dataset, *, object_kind: str, kapp
         polarity: "bright" if the object is brighter than the table after max(R, G, B).
         nn1_epochs: NN1's Rprop steps (at most).
         nn2_epochs: NN2's Rprop steps (at most).
-        nn2_weight_decay: L2 penalty on NN2's weights (0 = none).
+        nn2_weight_decay: L2 penalty on NN2's weights (0 = none; None: the part's default,
+            ``default_nn2_weight_decay(kappa)``).
         localisation_channel: the image the object is binarised and localised in: "max"
             (normalised max(R, G, B), the paper's), "saturation" (unchanged by light and
             shadow for a coloured part on a grey table) or "auto" (whichever separates part
@@ -388,13 +409,14 @@ def train_bundle(nn1_data: Dataset, nn2_data: Dataset, *, object_kind: str, kapp
         logger.warning("no training image at the taught pose: NN1's zero is not pinned")
     nominal_uv = tuple(float(v) for v in (uv[at_nominal] if at_nominal.any() else uv)
                        .mean(axis=0))
-    nn1, nn1_zero_offset = _train_pinned(uv, dxdy, at_nominal, seed, nn1_epochs)
+    nn1, nn1_zero_offset = _train_pinned(uv, dxdy, at_nominal, seed, nn1_epochs, NN1_HIDDEN)
     # The full loop knows the rotation (NN2) before it moves: the silhouette's centre shifts a
     # little with the part's rotation in the image, which (u, v) alone cannot tell apart from
     # a translation, so the full loop's translation also sees sin/cos(kappa dphi).
     s_rot, c_rot = angles.encode(labels[:, 2], kappa)
     uvsc = np.column_stack([uv, s_rot, c_rot])
-    nn1_rot, nn1_rot_zero_offset = _train_pinned(uvsc, dxdy, at_nominal, seed + 2, nn1_epochs)
+    nn1_rot, nn1_rot_zero_offset = _train_pinned(uvsc, dxdy, at_nominal, seed + 2, nn1_epochs,
+                                                 NN1_ROT_HIDDEN)
 
     rois = [extract_roi(prep.normalised["nn2"][i], u, v, gabor.roi_px)
             for i, (u, v) in zip(prep.usable["nn2"], prep.centres("nn2"), strict=True)]
@@ -408,7 +430,9 @@ def train_bundle(nn1_data: Dataset, nn2_data: Dataset, *, object_kind: str, kapp
         "preprocess_seconds": prep.seconds,
         "nn1": {**_summary(nn1), "zero_offset_mm": nn1_zero_offset},
         "nn1_rot": {**_summary(nn1_rot), "zero_offset_mm": nn1_rot_zero_offset},
-        "nn2": _summary(nn2),
+        "nn2": {**_summary(nn2), "weight_decay": (default_nn2_weight_decay(kappa)
+                                                  if nn2_weight_decay is None
+                                                  else nn2_weight_decay)},
         "seconds": time.perf_counter() - start,
         "created_utc": time.strftime("%Y-%m-%dT%H:%M:%SZ", time.gmtime()),
     }
@@ -421,12 +445,12 @@ def train_bundle(nn1_data: Dataset, nn2_data: Dataset, *, object_kind: str, kapp
 
 
 def _train_pinned(x: np.ndarray, y: np.ndarray, at_nominal: np.ndarray, seed: int,
-                  epochs: int) -> tuple[TrainedMLP, list[float]]:
-    """A translation network (NN1_HIDDEN, Rprop) whose output is pinned to zero at the
+                  epochs: int, hidden: tuple[int, ...]) -> tuple[TrainedMLP, list[float]]:
+    """A translation network (``hidden`` units, Rprop) whose output is pinned to zero at the
     samples taken at the taught pose: that is where the correction is zero by definition,
     and where the loop settles (a 3-hidden-unit fit over +/-25 mm otherwise misses it by a
     few tenths of a millimetre). Returns the network and the offset subtracted."""
-    trained = train_mlp(x, y, NN1_HIDDEN, seed=seed, epochs=epochs)
+    trained = train_mlp(x, y, hidden, seed=seed, epochs=epochs)
     if not at_nominal.any():
         return trained, [0.0, 0.0]
     offset = trained.model(x[at_nominal]).mean(axis=0).tolist()

@@ -18,7 +18,7 @@ from typing import Any, Literal
 from calibration_free.baselines.hough.model import HoughConfig
 from calibration_free.baselines.pca.model import PcaConfig
 from calibration_free.gabor import GaborConfig
-from calibration_free.training import NN2_HIDDEN, NN2_WEIGHT_DECAY
+from calibration_free.training import NN2_HIDDEN
 from controller.devices import DeviceSection, parse_device_section
 from controller.loop.grasp import GraspConfig
 from controller.loop.positioning import LoopConfig
@@ -48,12 +48,21 @@ class GridConfig:
 
 
 @dataclass(frozen=True)
+class Nn2GridConfig(GridConfig):
+    """NN2's grid: as ``GridConfig``, with NN2's defaults (a = 5 mm, staggered), so a config
+    that sets only some of its keys keeps the others."""
+
+    a_mm: float = field(default=5.0, metadata={"min": 0.0})
+    staggered: bool = True
+
+
+@dataclass(frozen=True)
 class AcquisitionConfig:
     """Config section ``controller.acquisition``: the NN1 and NN2 training grids (paper
     defaults) and the random test set."""
 
-    nn1: GridConfig = GridConfig(a_mm=25.0)
-    nn2: GridConfig = GridConfig(a_mm=5.0, staggered=True)
+    nn1: GridConfig = GridConfig()
+    nn2: Nn2GridConfig = Nn2GridConfig()
     test_count: int = field(default=50, metadata={"min": 1})
 
 
@@ -93,7 +102,8 @@ class PerceptionConfig:
 
     nn2_hidden: hidden layer sizes of NN2, 1 to 8 layers of 1 to 4096 units (NN1 is the paper's
     2-3-2); nn2_weight_decay: L2
-    penalty on NN2's weights, so it interpolates between the grid's angles;
+    penalty on NN2's weights, so it interpolates between the grid's angles (unset: 1e-2, and
+    1e-3 for a part without symmetry, ``calibration_free.training.default_nn2_weight_decay``);
     localisation_channel: the image the part is localised in (``max``: normalised max(R,G,B),
     the paper's; ``saturation``: unchanged by light and shadow for a coloured part; ``auto``:
     whichever separates part and table better in the training images); pca / hough: the
@@ -104,7 +114,7 @@ class PerceptionConfig:
 
     gabor: GaborConfig = GaborConfig()
     nn2_hidden: tuple[int, ...] = field(default=NN2_HIDDEN, metadata={"min": 1, "max": 4096})
-    nn2_weight_decay: float = field(default=NN2_WEIGHT_DECAY, metadata={"min": 0.0})
+    nn2_weight_decay: float | None = field(default=None, metadata={"min": 0.0})
     localisation_channel: Literal["max", "saturation", "auto"] = "auto"
     pca: PcaConfig = PcaConfig()
     hough: HoughConfig = HoughConfig()

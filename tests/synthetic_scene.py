@@ -6,7 +6,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from calibration_free.dataset import Dataset, grid_offsets
+from calibration_free.dataset import Dataset, grid_offsets, staggered_grid_offsets
 from calibration_free.synthetic import SyntheticCell, render_dataset
 
 KAPPA = 4
@@ -21,10 +21,12 @@ def cell() -> SyntheticCell:
 
 @pytest.fixture(scope="session")
 def grids(cell) -> tuple[Dataset, Dataset]:
-    """The paper's training sets: 3x3x7 grids with a = 25 mm (NN1) and 5 mm (NN2)."""
+    """The training sets as finepos acquires them: the paper's 3x3x7 grids with a = 25 mm
+    (NN1) and 5 mm (NN2), NN2's rotations staggered over its positions (the default,
+    ``controller.acquisition.nn2.staggered``)."""
     rng = np.random.default_rng(1)
     return (render_dataset(cell, grid_offsets(25.0, 180.0 / KAPPA), rng),
-            render_dataset(cell, grid_offsets(5.0, 180.0 / KAPPA), rng))
+            render_dataset(cell, staggered_grid_offsets(5.0, 180.0 / KAPPA), rng))
 
 
 def wrapped_error_deg(estimate: np.ndarray, truth: np.ndarray) -> np.ndarray:

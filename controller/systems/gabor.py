@@ -1,4 +1,5 @@
-"""The paper's system: NN1 on the part's centre, NN2 on 36 Gabor features of the ROI."""
+"""The paper's system: NN1 on the part's centre, NN2 on 36 Gabor features of the ROI; every
+look's translation from the rotation-aware net (the part's centre and NN2's rotation)."""
 
 from __future__ import annotations
 
@@ -25,20 +26,32 @@ class GaborEstimator:
         self.perception = Perception(bundle)
 
     def estimate_translation(self, image: np.ndarray) -> TranslationEstimate:
-        """Localisation and NN1; see ``Estimator.estimate_translation``."""
-        p = self.perception.translation(image)
+        """Localisation, NN1, and NN2 with the rotation-aware translation (``nn1_rot``); see
+        ``Estimator.estimate_translation``.
+
+        The translation is ``nn1_rot``'s, which knows the part's rotation: the silhouette's
+        centre moves with the part's turn (for a part without symmetry, a screw, by several
+        millimetres), which NN1 on (u, v) alone takes for a translation, so its reading sends a
+        half loop millimetres off and misjudges r_fine. The 36 features and NN2 cost a few
+        tens of microseconds a frame. The record keeps both readings: ``nn1_rot`` (the
+        translation returned) and NN1's own (``nn1``).
+        """
+        p = self.perception.perceive(image)
         loc = p.localisation
         if not p.ok:
             return TranslationEstimate(loc.status, reason=loc.reason,
                                        record={"area_px": loc.area_px}, percept=p)
-        return TranslationEstimate("ok", p.nn1_mm[0], p.nn1_mm[1], loc.u_px, loc.v_px,
+        return TranslationEstimate("ok", p.full_mm[0], p.full_mm[1], loc.u_px, loc.v_px,
                                    record={"area_px": loc.area_px, "nn1": list(p.nn1_mm),
+                                           "nn1_rot": list(p.full_mm),
                                            "perception_us": p.timings_us}, percept=p)
 
     def estimate_rotation(self, translation: TranslationEstimate) -> RotationEstimate:
-        """ROI, Gabor features, NN2 and the rotation-aware translation; see
-        ``Estimator.estimate_rotation``."""
-        p = self.perception.rotation(percept_of(translation, Percept))
+        """ROI, Gabor features, NN2 and the rotation-aware translation (already perceived
+        with the translation); see ``Estimator.estimate_rotation``."""
+        p = percept_of(translation, Percept)
+        if p.dphi_deg is None:
+            p = self.perception.rotation(p)
         return RotationEstimate(p.dphi_deg, record={
             "features": p.features.tolist(), "nn2": list(p.nn2_sc), "nn1_rot": list(p.full_mm),
             "perception_us": p.timings_us}, dx_mm=p.full_mm[0], dy_mm=p.full_mm[1])

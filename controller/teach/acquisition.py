@@ -16,7 +16,12 @@ from collections.abc import Callable
 import numpy as np
 from tqdm import tqdm
 
-from calibration_free.dataset import Dataset, grid_offsets, random_offsets
+from calibration_free.dataset import (
+    Dataset,
+    grid_offsets,
+    random_offsets,
+    staggered_grid_offsets,
+)
 from drivers.core.pose import Pose, ToolStep
 from drivers.interfaces import Arm, Camera
 
@@ -78,9 +83,11 @@ def acquire(arm: Arm, camera: Camera, nominal: Pose, offsets: np.ndarray, *,
 
 
 def grid_for(grid_cfg, kappa: int) -> np.ndarray:
-    """The displacement grid of a GridConfig (b = 180/kappa unless set), serpentine ordered."""
+    """The displacement grid of a GridConfig (b = 180/kappa unless set; its rotations
+    staggered over the positions if ``staggered``), serpentine ordered."""
     b = grid_cfg.b_deg if grid_cfg.b_deg is not None else 180.0 / max(kappa, 1)
-    return serpentine(grid_offsets(grid_cfg.a_mm, b, tuple(grid_cfg.shape)))
+    offsets = staggered_grid_offsets if getattr(grid_cfg, "staggered", False) else grid_offsets
+    return serpentine(offsets(grid_cfg.a_mm, b, tuple(grid_cfg.shape)))
 
 
 def random_set(rng: np.random.Generator, n: int, a_mm: float, kappa: int) -> np.ndarray:

@@ -8,7 +8,12 @@ import json
 import numpy as np
 import pytest
 
-from calibration_free.dataset import Dataset, grid_offsets, random_offsets
+from calibration_free.dataset import (
+    Dataset,
+    grid_offsets,
+    random_offsets,
+    staggered_grid_offsets,
+)
 from calibration_free.errors import DatasetError
 
 
@@ -52,6 +57,39 @@ def test_grid_is_the_papers_3x3x7():
     assert grid_offsets(5.0, 10.0, (1, 2, 1)).tolist() == [[0.0, -5.0, 0.0], [0.0, 5.0, 0.0]]
     with pytest.raises(DatasetError, match="grid"):
         grid_offsets(-1.0, 10.0)
+
+
+@pytest.mark.parametrize("kappa", [1, 2, 4, 6])
+def test_staggered_grid_shows_63_distinct_rotations_over_the_period(kappa):
+    b = 180.0 / kappa
+    labels = staggered_grid_offsets(5.0, b)
+    plain = grid_offsets(5.0, b)
+    assert labels.shape == (63, 3)
+    np.testing.assert_array_equal(labels[:, :2], plain[:, :2])  # the same 9 positions
+    phi = np.sort(labels[:, 2])
+    # 63 distinct rotations evenly 2b/63 apart, within [-b, b), never both ends of the period
+    np.testing.assert_allclose(np.diff(phi), 2.0 * b / 63.0, rtol=1e-9)
+    assert -b < phi[0] and phi[-1] < b
+    assert phi[0] + 2.0 * b - phi[-1] == pytest.approx(2.0 * b / 63.0)  # across the wrap too
+    # the plain grid has only 6 distinct views of the period (its two ends are one view)
+    views = {round(float(v) % (2.0 * b), 6) for v in plain[:, 2]}
+    assert len(views) == 6
+    # every position keeps 7 rotations, evenly spaced, shifted differently at each position
+    per_position = labels[:, 2].reshape(9, 7)
+    np.testing.assert_allclose(np.diff(per_position, axis=1), 2.0 * b / 7.0)
+    assert len({round(float(r[0]), 6) for r in per_position}) == 9
+    # neighbouring positions do not get neighbouring shifts
+    assert np.abs(np.diff(per_position[:, 0])).min() > 2.0 * b / 63.0 * 1.5
+
+
+def test_staggered_grid_edge_cases():
+    np.testing.assert_array_equal(staggered_grid_offsets(5.0, 45.0, (3, 3, 1)),
+                                  grid_offsets(5.0, 45.0, (3, 3, 1)))
+    np.testing.assert_array_equal(staggered_grid_offsets(5.0, 0.0), grid_offsets(5.0, 0.0))
+    one = staggered_grid_offsets(0.0, 90.0, (1, 1, 4))
+    np.testing.assert_allclose(one[:, 2], [-67.5, -22.5, 22.5, 67.5])
+    with pytest.raises(DatasetError, match="grid"):
+        staggered_grid_offsets(5.0, -1.0)
 
 
 def test_random_offsets_are_in_range_and_seeded():

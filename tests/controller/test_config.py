@@ -48,3 +48,11 @@ def test_file_errors_name_the_file(tmp_path):
     f.write_text("scene:\n  clutter: {count: 99}\n")
     with pytest.raises(ConfigError, match=r"cell.yaml: scene.clutter.count: must be <= 8"):
         load_config(f)
+
+
+def test_a_partial_nn2_grid_keeps_nn2s_defaults():
+    config = config_from_mapping({"controller": {"acquisition": {"nn2": {"shape": [3, 3, 3]}}}},
+                                 "<test>")
+    nn2 = config.controller.acquisition.nn2
+    assert (nn2.a_mm, nn2.staggered, nn2.shape) == (5.0, True, (3, 3, 3))
+    assert config.controller.acquisition.nn1.a_mm == 25.0

@@ -31,9 +31,9 @@ def test_converges_to_a_safe_grasp_within_a_small_budget(trained, tmp_path, offs
         assert grasp.success, grasp.reason
         assert devices.cell.holding
     records = read_log(tmp_path / "it.jsonl")
-    for r in records:  # the rule: a half loop exactly when NN1's estimate exceeds r_fine
+    for r in records:  # the rule: a half loop exactly when the translation exceeds r_fine
         if r["loop_kind"] in ("half", "full"):
-            assert (r["loop_kind"] == "half") == (math.hypot(*r["nn1"]) > 4.0)
+            assert (r["loop_kind"] == "half") == (math.hypot(*r["nn1_rot"]) > 4.0)
     assert all(r["error"] is not None for r in records)
     full = [r for r in records if r["loop_kind"] == "full"]
     assert full and len(full[0]["features"]) == 36 and len(full[0]["nn2"]) == 2

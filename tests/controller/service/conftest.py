@@ -16,7 +16,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from calibration_free.dataset import grid_offsets
+from calibration_free.dataset import grid_offsets, staggered_grid_offsets
 from calibration_free.synthetic import SyntheticCell, render, render_dataset
 from calibration_free.training import train_bundle
 from controller.config import config_from_mapping
@@ -217,8 +217,8 @@ def cube_model_files(tmp_path_factory) -> Path:
     """A state folder with a cube teach-in (cell.json) and a quickly trained gabor model."""
     folder = tmp_path_factory.mktemp("cube-model")
     cell, rng = SyntheticCell(), np.random.default_rng(0)
-    nn1 = render_dataset(cell, grid_offsets(25.0, 45.0, (3, 3, 3)), rng)
-    nn2 = render_dataset(cell, grid_offsets(5.0, 45.0, (3, 3, 3)), rng)
+    nn1 = render_dataset(cell, grid_offsets(25.0, 45.0, (3, 3, 7)), rng)
+    nn2 = render_dataset(cell, staggered_grid_offsets(5.0, 45.0, (3, 3, 7)), rng)
     bundle = train_bundle(nn1, nn2, object_kind="cube", kappa=4,
                           nominal_pose=NOMINAL.as_dict(), nn1_epochs=50, nn2_epochs=50)
     bundle.save(folder / "model-gabor.fpm")
@@ -234,8 +234,8 @@ def two_part_model_files(tmp_path_factory, cube_model_files) -> Path:
     folder = tmp_path_factory.mktemp("two-parts")
     shutil.copytree(cube_model_files, folder / "cube")
     cell, rng = SyntheticCell(), np.random.default_rng(1)
-    nn1 = render_dataset(cell, grid_offsets(25.0, 30.0, (3, 3, 3)), rng)
-    nn2 = render_dataset(cell, grid_offsets(5.0, 30.0, (3, 3, 3)), rng)
+    nn1 = render_dataset(cell, grid_offsets(25.0, 30.0, (3, 3, 7)), rng)
+    nn2 = render_dataset(cell, staggered_grid_offsets(5.0, 30.0, (3, 3, 7)), rng)
     bundle = train_bundle(nn1, nn2, object_kind="nut", kappa=6,
                           nominal_pose=NOMINAL.as_dict(), nn1_epochs=50, nn2_epochs=50)
     (folder / "nut").mkdir()

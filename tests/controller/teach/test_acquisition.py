@@ -4,7 +4,8 @@ import numpy as np
 import pytest
 
 from calibration_free.dataset import grid_offsets
-from controller.teach.acquisition import acquire, serpentine, transfer
+from controller.config import GridConfig
+from controller.teach.acquisition import acquire, grid_for, serpentine, transfer
 from drivers.core.pose import Pose, ToolStep
 from drivers.safety import SafetyLimits
 from tests.mocks.fakes import FakeArm, FakeCamera
@@ -49,3 +50,18 @@ def test_labels_are_the_exact_step_back_to_nominal_even_with_tracking_error():
         assert back.tool_step_to(NOMINAL).translation_mm == pytest.approx(0.0, abs=1e-9)
         assert label[2] == pytest.approx(dphi - 0.5, abs=1e-9)
     assert arm.moves[-1].tool_step_to(NOMINAL).translation_mm < 0.5  # back at nominal
+
+
+@pytest.mark.parametrize("kappa", [1, 2, 4, 6])
+def test_grid_for_staggers_the_nn2_grid_and_keeps_the_nn1_grid(kappa):
+    period = 360.0 / kappa
+    nn1 = grid_for(GridConfig(a_mm=25.0), kappa)
+    nn2 = grid_for(GridConfig(a_mm=5.0, staggered=True), kappa)
+    assert nn1.shape == nn2.shape == (63, 3)
+    assert len(np.unique(nn1[:, 2])) == 7            # the paper's grid (the PSOM needs it)
+    assert len(np.unique(nn2[:, 2].round(6))) == 63
+    assert np.abs(nn2[:, 2]).max() < period / 2 and np.abs(nn2[:, :2]).max() == 5.0
+    # serpentine order: consecutive moves stay short
+    assert np.abs(np.diff(nn2[:, :2], axis=0)).max() <= 5.0 + 1e-9
+    b = grid_for(GridConfig(a_mm=5.0, b_deg=10.0, staggered=True), kappa)
+    assert np.abs(b[:, 2]).max() < 10.0
