@@ -10,6 +10,7 @@ one for its lifetime. Files live in its state folder, the part's folder under
 from __future__ import annotations
 
 import logging
+import math
 from pathlib import Path
 
 import numpy as np
@@ -213,9 +214,11 @@ class FinePositioner:
             self.load_model()
         estimator = SYSTEMS[self._model.system].estimator(self._model)
         truth = self.devices.ground_truth if self.devices.cell is not None else None
+        nn1_grid = self.config.controller.acquisition.nn1
         self._loop = PositioningLoop(self.devices.arm, self.devices.camera,
                                      self.config.controller.loop, self.log, truth,
-                                     recorder=self.recorder)
+                                     recorder=self.recorder,
+                                     reach_mm=nn1_grid.a_mm * math.sqrt(2.0))
         try:
             return self._loop.run(estimator, max_loops)
         finally:

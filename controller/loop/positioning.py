@@ -5,11 +5,14 @@ loop, counts 0.5) -> else estimate rotation (with a translation refined by it, w
 system has one) and move (dx, dy, dphi) (a full loop, counts 1) ->
 repeat until a full look finds a step below the convergence thresholds (no move, the pose is
 reached) or the loop budget is spent. "No object" / "ambiguous" stop without moving. Every
-step passes the arm's safety layer; a rejected step stops the loop.
+step passes the arm's safety layer; a rejected step stops the loop. A turn larger than the
+arm's ``max_step_deg`` (a part without symmetry may need up to 180 deg) is taken in part, and
+the next look measures the rest.
 """
 
 from __future__ import annotations
 
+import dataclasses
 import logging
 import math
 import time
@@ -25,12 +28,13 @@ from controller.loop.iteration_log import IterationLog
 from controller.loop.record import IterationRecord, LoopKind
 from controller.systems.estimator import Estimator, TranslationEstimate, corrective_step
 from drivers.core.errors import MotionRejectedError
+from drivers.core.pose import ToolStep
 from drivers.interfaces import Arm, Camera, Frame
 
 logger = logging.getLogger(__name__)
 
 GroundTruth = Callable[[], tuple[float, float, float]]
-Outcome = Literal["converged", "budget", "no_object", "ambiguous", "rejected"]
+Outcome = Literal["converged", "budget", "no_object", "ambiguous", "out_of_range", "rejected"]
 
 
 class LookRecorder(Protocol):
@@ -51,13 +55,17 @@ class LoopConfig:
     r_fine_mm: above this translation only half (translation) loops are made (paper: 4 mm);
     converge_mm / converge_deg: a full look whose step is below both ends the loop;
     max_loops: loop budget (half = 0.5, full = 1);
+    reach_factor: a correction read beyond this many times the training range (the NN1
+    grid's largest displacement) is not taken: the blob is not the taught part, or the part
+    is not where it was taught, and the loop stops (``out_of_range``) without moving;
     save_images: save each grabbed image as PNG next to the iteration log.
     """
 
     r_fine_mm: float = field(default=4.0, metadata={"min": 0.0})
-    converge_mm: float = field(default=0.1, metadata={"min": 0.0})
-    converge_deg: float = field(default=0.5, metadata={"min": 0.0})
+    converge_mm: float = field(default=0.05, metadata={"min": 0.0})
+    converge_deg: float = field(default=0.3, metadata={"min": 0.0})
     max_loops: float = field(default=6.0, metadata={"min": 0.5})
+    reach_factor: float = field(default=1.25, metadata={"min": 1.0})
     save_images: bool = False
 
 
@@ -71,7 +79,8 @@ class LoopState:
 
 @dataclass
 class PositioningResult:
-    """outcome: converged | budget | no_object | ambiguous | rejected; reason in words;
+    """outcome: converged | budget | no_object | ambiguous | out_of_range | rejected; reason
+    in words;
     loops: cumulative loop count spent; states: LoopState at the start and after every move;
     seconds_per_iteration: wall time of each look-and-move iteration."""
 
@@ -89,14 +98,27 @@ class PositioningResult:
         return self.outcome in ("converged", "budget")
 
 
+def _turn_within_limits(step: ToolStep, arm: Arm) -> ToolStep:
+    """The step with its rotation cut to the arm's ``max_step_deg``: a part without symmetry
+    (kappa 1) may need a turn of up to 180 deg, which the safety layer rejects as one command;
+    the loop turns as far as allowed and the next look measures the rest."""
+    limits = getattr(arm, "limits", None)
+    if limits is None or abs(step.dphi_deg) <= limits.max_step_deg:
+        return step
+    logger.debug("turn of %.1f deg taken in part (max_step_deg %g)", step.dphi_deg,
+                 limits.max_step_deg)
+    return dataclasses.replace(step, dphi_deg=math.copysign(limits.max_step_deg, step.dphi_deg))
+
+
 class PositioningLoop:
     """Runs the half/full loop with one estimator on one arm and camera."""
 
     def __init__(self, arm: Arm, camera: Camera, config: LoopConfig,
                  log: IterationLog | None = None, ground_truth: GroundTruth | None = None,
                  image_dir: str | Path | None = None,
-                 recorder: LookRecorder | None = None) -> None:
+                 recorder: LookRecorder | None = None, reach_mm: float | None = None) -> None:
         self.arm = arm
+        self.reach_mm = reach_mm  # the training range (None: not checked)
         self.camera = camera
         self.config = config
         self.log = log
@@ -155,6 +177,13 @@ class PositioningLoop:
             if tr.status != "ok":
                 self._write(record, "stop", (t0, t1, time.perf_counter()), frame.image)
                 return finish(tr.status, tr.reason or tr.status)
+            read_mm = math.hypot(tr.dx_mm, tr.dy_mm)
+            if self.reach_mm is not None and read_mm > cfg.reach_factor * self.reach_mm:
+                self._write(record, "stop", (t0, t1, time.perf_counter()), frame.image)
+                return finish("out_of_range", f"the correction read, {read_mm:.1f} mm, is "
+                                              f"beyond the training range ({self.reach_mm:.1f}"
+                                              " mm): not the taught part, or not where it "
+                                              "was taught")
             if math.hypot(tr.dx_mm, tr.dy_mm) > cfg.r_fine_mm:
                 kind, cost = "half", 0.5
                 step = corrective_step(tr)
@@ -162,7 +191,7 @@ class PositioningLoop:
                 kind, cost = "full", 1.0
                 rot = estimator.estimate_rotation(tr)
                 record.estimates.update(rot.record)
-                step = corrective_step(tr, rot)
+                step = _turn_within_limits(corrective_step(tr, rot), self.arm)
             record.commanded = step
             shift = math.hypot(step.dx_mm, step.dy_mm)
             t2 = time.perf_counter()

@@ -22,7 +22,7 @@ from drivers.core.files import atomic_write_text
 
 TABLE_BUDGETS = (1.5, 2.5, 5.0, 6.5)  # loops: every budget the paper's Table 1 quotes, <= 6.5
 VERDICT_BUDGET = 2.5
-STOPPED = ("no_object", "ambiguous", "rejected")  # outcomes that stop a run early
+STOPPED = ("no_object", "ambiguous", "out_of_range", "rejected")  # outcomes that stop a run early
 
 PAPER_TABLE1 = """\
 | system | good light | poor light | rotation features | training |
@@ -83,9 +83,10 @@ def _accuracy(result: Table1Result) -> list[str]:
 
 
 def _failures(result: Table1Result) -> list[str]:
-    lines = ["| system | light | converged | budget spent | no object | ambiguous | rejected "
-             "| converged off target | failure rate | no-object rate | grasp success |",
-             "|---|---|---|---|---|---|---|---|---|---|---|"]
+    lines = ["| system | light | converged | budget spent | no object | ambiguous | "
+             "out of range | rejected | converged off target | failure rate | no-object rate "
+             "| grasp success |",
+             "|---|---|---|---|---|---|---|---|---|---|---|---|"]
     for r in result.reports:
         key = (r["system"], r["lighting"])
         o = r["outcomes"]

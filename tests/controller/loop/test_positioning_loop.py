@@ -74,12 +74,42 @@ def test_no_object_stops_without_moving(status, tmp_path):
     assert record["status"] == status and record["executed"] is None
 
 
+def test_a_correction_beyond_the_training_range_is_not_taken(tmp_path):
+    # reach 35.4 mm (a 25 mm grid), factor 1.25: 44.2 mm is the longest correction taken
+    arm, cam, cfg = make(ToolStep(46.0, 0.0, 0.0, 0.0))
+    with IterationLog(tmp_path / "it.jsonl") as log:
+        result = PositioningLoop(arm, cam, cfg, log, reach_mm=25.0 * 2 ** 0.5).run(
+            TruthEstimator(arm))
+    assert result.outcome == "out_of_range" and "training range" in result.reason
+    assert arm.moves == []
+    (record,) = read_log(tmp_path / "it.jsonl")
+    assert record["loop_kind"] == "stop" and record["executed"] is None
+    arm, cam, cfg = make(ToolStep(40.0, 0.0, 0.0, 0.0))  # within reach: positioned
+    result = PositioningLoop(arm, cam, cfg, reach_mm=25.0 * 2 ** 0.5).run(TruthEstimator(arm))
+    assert result.outcome == "converged"
+
+
 def test_safety_rejection_stops_the_loop():
     limits = SafetyLimits(max_step_mm=5.0, on_violation="reject")
     arm, cam, cfg = make(ToolStep(20.0, 0.0, 0.0, 0.0), limits=limits)
     result = PositioningLoop(arm, cam, cfg).run(TruthEstimator(arm))
     assert result.outcome == "rejected" and "max_step_mm" in result.reason
     assert arm.moves == []
+
+
+def test_a_turn_beyond_max_step_deg_is_taken_in_part(tmp_path):
+    limits = SafetyLimits(max_step_deg=100.0, on_violation="reject")
+    arm, cam, cfg = make(ToolStep(1.0, -1.0, 0.0, 170.0), limits=limits)
+    with IterationLog(tmp_path / "it.jsonl") as log:
+        result = PositioningLoop(arm, cam, cfg, log, lambda: truth_error(arm)).run(
+            TruthEstimator(arm, kappa=1))
+    assert result.outcome == "converged"
+    first = read_log(tmp_path / "it.jsonl")[0]
+    assert first["loop_kind"] == "full" and first["clipped"] is False
+    assert first["commanded"]["dphi_deg"] == pytest.approx(-100.0)
+    assert all(abs(m_phi) <= 100.0 + 1e-9 for m_phi in
+               (r["commanded"]["dphi_deg"] for r in read_log(tmp_path / "it.jsonl")))
+    assert result.states[1].loops == 1.0 and result.iterations >= 2
 
 
 def test_clipped_steps_are_logged_as_executed(tmp_path):
