@@ -54,9 +54,9 @@ class FrontEnd:
             that match the part, one clearly nearest this point is taken. None: several
             matching blobs are ambiguous.
         chroma: the part's colour in the training images, as chromaticity (R, G, B over
-            their sum, summed over its blob: independent of brightness); where several blobs
-            are measured (a cluttered image), one of another colour is not the part. None:
-            colour is not checked (model files written before it was learned).
+            their sum, summed over its blob: independent of brightness); of several blobs
+            of the part's size and shape (a cluttered image), those of this colour are
+            preferred. None: colour is not used (model files written before it was learned).
         chroma_tolerance: the largest chromaticity distance still taken for the part.
     """
 
@@ -135,8 +135,8 @@ class FrontEnd:
 
         Args:
             preprocessed: HxW float32, what ``preprocess`` returned for the frame.
-            image: the RGB frame itself: with it (and a learned ``chroma``), blobs of
-                another colour are not taken for the part in a cluttered image.
+            image: the RGB frame itself: with it (and a learned ``chroma``), of several
+                candidate blobs those of the part's colour are preferred.
 
         Returns:
             The Localisation (ok, no_object or ambiguous, with the reason).
@@ -207,7 +207,7 @@ class FrontEnd:
                    float(loc.get("chroma_tolerance", 0.0)))
 
 
-# The colour check's tolerance: this many times the largest chromaticity distance seen among
+# The colour preference's tolerance: this many times the largest chromaticity distance seen among
 # the training images (lighting, noise, the part's own shading), and at least the floor: the
 # construction set's colours lie 0.2 or more apart (yellow, wood, red, green, blue).
 CHROMA_SPREAD_FACTOR = 2.0

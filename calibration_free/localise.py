@@ -166,8 +166,9 @@ def localise(normalised: np.ndarray, threshold: float, expected_area_px: float |
         expected_uv: where the part appeared at the taught pose. When several blobs match,
             the one nearest this point is taken if it is clearly nearest (closer than
             ``NEAREST_RATIO`` times the runner-up); otherwise the result is ambiguous.
-        blob_check: where several blobs are measured (the components path), a blob of the
-            part's area and shape is a candidate only if this also accepts it.
+        blob_check: where several blobs of the part's area and shape are measured (the
+            components path), those this accepts are preferred; a lone candidate is taken
+            whatever it says.
 
     Returns:
         The Localisation; see its docstring for the three statuses.
@@ -261,14 +262,12 @@ def _by_components(mask: np.ndarray, expected_area_px: float | None, area_tolera
                 "no_object", None, None, None,
                 f"no blob within {area_tolerance:.0%} of the expected {expected_area_px:.0f} px"
                 f" (largest: {areas[blobs].max():.0f} px of {blobs.size} blobs)", "components")
-        if blob_check is not None:
+        if blob_check is not None and close.size > 1:
+            # Several candidates: those the check accepts (the part's colour) go first; with
+            # none accepted, all stay and the nearest rule below decides.
             checked = [i for i in close if _blob_passes(labels, stats, int(i) + 1, blob_check)]
-            if not checked:
-                return Localisation(
-                    "no_object", None, None, None,
-                    f"{close.size} blob(s) of the part's area and shape, none of its colour",
-                    "components")
-            close = np.array(checked, dtype=close.dtype)
+            if checked:
+                close = np.array(checked, dtype=close.dtype)
         if close.size > 1:
             nearest = _clearly_nearest(centroids[close + 1], expected_uv)
             if nearest is None:

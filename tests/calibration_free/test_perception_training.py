@@ -12,7 +12,7 @@ from calibration_free.dataset import Dataset, random_offsets
 from calibration_free.errors import ImageError, TrainingError
 from calibration_free.perception import Perception
 from calibration_free.synthetic import render, render_at
-from calibration_free.training import train_bundle
+from calibration_free.training import default_nn2_weight_decay, train_bundle
 
 from .conftest import KAPPA, NOMINAL_POSE
 
@@ -48,7 +48,16 @@ def test_training_records_what_it_did(bundle):
         assert t[net]["seconds"] > 0
     assert t["seconds"] >= t["nn1"]["seconds"] + t["nn2"]["seconds"]
     assert bundle.object_kind == "cube" and bundle.nominal_pose == NOMINAL_POSE
+    # the rotation-aware translation net: (u, v, sin, cos) -> 10 tanh units -> (dx, dy)
+    assert t["nn1_rot"]["layers"] == [4, 10, 2]
+    assert t["nn2"]["weight_decay"] == default_nn2_weight_decay(KAPPA)
     assert 700 < bundle.front.expected_area_px < 950  # a 30 px rounded square minus its hole
+
+
+def test_nn2_weight_decay_is_looser_for_a_part_without_symmetry():
+    # a screw's NN2 maps the whole circle; symmetric parts are held tighter against noise
+    decay = {kappa: default_nn2_weight_decay(kappa) for kappa in (1, 2, 4, 6)}
+    assert decay[1] < decay[2] == decay[4] == decay[6]
 
 
 def test_perception_corrects_random_poses_near_the_nominal(bundle, cell):
@@ -189,9 +198,11 @@ def test_clearly_nearest_of_two_matching_blobs_is_taken(bundle, cell):
     assert Perception(bundle).perceive(both_far).localisation.status == "ambiguous"
 
 
-def test_a_part_of_another_colour_is_not_taken_for_the_part(bundle, cell):
+def test_of_two_candidates_the_one_of_the_parts_colour_is_taken(bundle, cell):
     """Clutter of the part's size and shape: the blob of the trained colour is the part, even
-    where the other is nearer the taught position; alone, the other is no part at all."""
+    where the other is nearer the taught position. A lone part of another colour is still
+    taken (a red cube for a yellow one), and two of another colour fall back to the nearest
+    rule."""
     u0, v0 = bundle.front.nominal_uv_px
     green = dataclasses.replace(cell, object_rgb=(50, 140, 60))
     frame = two_parts(cell, render_at(cell, u0 + 45.0, v0, 0.0),
@@ -199,10 +210,11 @@ def test_a_part_of_another_colour_is_not_taken_for_the_part(bundle, cell):
     p = Perception(bundle).perceive(frame)
     assert p.ok and abs(p.u_px - (u0 + 45.0)) < 1.0
     alone = Perception(bundle).perceive(render_at(green, u0 - 40.0, v0, 30.0))
-    # a lone blob goes the histogram path (one compact blob): the colour is checked only where
-    # several blobs are measured
     assert alone.ok
     both = two_parts(green, render_at(green, u0 - 40.0, v0, 30.0),
                      render_at(green, u0 + 45.0, v0, 0.0))
-    p = Perception(bundle).perceive(both)
-    assert p.localisation.status == "no_object" and "colour" in p.localisation.reason
+    assert Perception(bundle).perceive(both).localisation.status == "ambiguous"
+    near = two_parts(green, render_at(green, u0 + 3.0, v0, 30.0),
+                     render_at(green, u0 + 70.0, v0, 0.0))
+    p = Perception(bundle).perceive(near)
+    assert p.ok and abs(p.u_px - (u0 + 3.0)) < 1.0
