@@ -16,6 +16,7 @@ BENCH_LEAVES = {
     "sim": "sim_backend.bench",
     "perception": "calibration_free.bench",
     "service": "controller.service.bench",
+    "soak": "controller.service.soak",
     "ati": "sim_backend.emulators.ati.bench",
     "camera-stream": "sim_backend.emulators.mjpeg.bench",
     "recording": "controller.recording.bench",

@@ -93,7 +93,7 @@ class ServiceConfig:
     reconnect_max_s: float = field(default=30.0, metadata=_POSITIVE)
     stall_timeout_s: float = field(default=180.0, metadata=_POSITIVE)
     stop_timeout_s: float = field(default=2.0, metadata={**_POSITIVE, "max": 600.0})
-    abort_wait_s: float = field(default=0.08, metadata={**_POSITIVE, "max": 10.0})
+    abort_wait_s: float = field(default=0.05, metadata={**_POSITIVE, "max": 10.0})
     tcp: TcpConfig | None = None
     record_dir: str | None = None
     live_view_port: int | None = field(default=None, metadata={"min": 1, "max": 65535})

@@ -121,8 +121,8 @@ class EmulatorLink:
         if self._closed:
             return
         self._closed = True
+        self.endpoint.close()  # first: it unregisters a connected TCP client from the selector
         self._selector.close()
-        self.endpoint.close()
         os.close(self._wake_r)
         os.close(self._wake_w)
 

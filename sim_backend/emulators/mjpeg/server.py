@@ -12,8 +12,10 @@ least one stream client is connected and shares each encoded frame with all of t
 camera (e.g. the simulated hand camera) is never used from two threads at once. The caller owns
 the camera's lifecycle (connect it first).
 
-Fault knob: ``paused`` (an Event): while set, streams get no frames (connections stay open), as
-with a network camera that hangs.
+Fault knobs: ``paused`` (an Event): while set, streams get no frames (connections stay open), as
+with a network camera that hangs; ``set_gone(True)``: the camera is gone (unplugged, rebooting):
+open streams end at once and every request is answered 503 until ``set_gone(False)``;
+``refused`` counts the streams ended and requests refused that way.
 """
 
 from __future__ import annotations
@@ -70,6 +72,8 @@ class MjpegServer(ThreadedServer):
         self.jpeg_quality = jpeg_quality
         self.chroma = chroma
         self.paused = threading.Event()
+        self.gone = threading.Event()
+        self.refused = 0
         self.frames_grabbed = 0
         self._requested_port = port
         self._camera_lock = threading.Lock()
@@ -113,6 +117,17 @@ class MjpegServer(ThreadedServer):
         self._httpd.server_close()  # joins the request threads
         self._httpd = None
 
+    def set_gone(self, gone: bool) -> None:
+        """Take the camera away (open streams end, requests get 503) or bring it back."""
+        with self._frame_changed:
+            (self.gone.set if gone else self.gone.clear)()
+            self._frame_changed.notify_all()
+        logger.info("MJPEG camera %s", "gone" if gone else "back")
+
+    def _refuse(self) -> None:
+        with self._frame_changed:
+            self.refused += 1
+
     # -- frames ---------------------------------------------------------------------------
     def grab_jpeg(self) -> bytes:
         """Grab one frame from the camera now and encode it.
@@ -152,11 +167,12 @@ class MjpegServer(ThreadedServer):
                     return
 
     def _next_jpeg(self, after_sequence: int) -> tuple[int, bytes] | None:
-        """Block until a frame newer than ``after_sequence``; None when the server closes."""
+        """Block until a frame newer than ``after_sequence``; None when the server closes or
+        the camera is gone."""
         with self._frame_changed:
-            self._frame_changed.wait_for(
-                lambda: self._closing.is_set() or self._sequence > after_sequence)
-            if self._closing.is_set():
+            self._frame_changed.wait_for(lambda: self._closing.is_set() or self.gone.is_set()
+                                         or self._sequence > after_sequence)
+            if self._closing.is_set() or self.gone.is_set():
                 return None
             assert self._jpeg is not None
             return self._sequence, self._jpeg
@@ -175,7 +191,10 @@ def _handler_class(server: MjpegServer) -> type[BaseHTTPRequestHandler]:
 
         def do_GET(self) -> None:  # noqa: N802 (http.server naming)
             path = self.path.split("?", 1)[0]
-            if path == STREAM_PATH:
+            if server.gone.is_set():
+                server._refuse()
+                self.send_error(HTTPStatus.SERVICE_UNAVAILABLE, "camera gone")
+            elif path == STREAM_PATH:
                 self._stream()
             elif path == SNAPSHOT_PATH:
                 self._snapshot()
@@ -214,6 +233,8 @@ def _handler_class(server: MjpegServer) -> type[BaseHTTPRequestHandler]:
                 logger.debug("MJPEG client %s left: %s", self.client_address, exc)
             finally:
                 server._client_joined(-1)
+            if server.gone.is_set():
+                server._refuse()
 
         def log_message(self, format: str, *args) -> None:  # noqa: A002 (base signature)
             logger.debug("MJPEG %s: " + format, self.client_address[0], *args)

@@ -26,6 +26,11 @@ logger = logging.getLogger(__name__)
 # Line noise as a wrong baud rate produces it.
 DEFAULT_GARBAGE = b"\xfe\x80\x13\xff\x00#\xe0"
 
+# What a listener hears (``ValEmulator.add_listener``): ("command", line) as a line is about to
+# run, ("done", line) once it has run (a move: the arm is at rest), ("fault", what) when a knob
+# acts: "link_drop", "garbage", "reply_delay" or "forced_error".
+ValListener = Callable[[str, str], None]
+
 
 @dataclass(frozen=True)
 class ValFaults:
@@ -59,7 +64,9 @@ class ValEmulator(LinkServer):
     this rate (``--timing realistic``: ``timing.val_baud``; None: unpaced). How long a motion
     takes is the arm's business: a SimArm with a wall-clock ``CellTiming`` returns from a move
     only after its motion time, so ``do move`` answers its prompt then; ``on_line`` is called
-    as each line arrives, before it is run (``CellTiming.begin_command``).
+    as each line arrives, before it is run (``CellTiming.begin_command``). Listeners
+    (``add_listener``) hear every line run and every fault a knob causes, from the serving
+    thread, so a test can see what the arm really received.
     """
 
     def __init__(self, arm: Arm, *, tcp_port: int | None = None, boot_questions: bool = False,
@@ -73,7 +80,17 @@ class ValEmulator(LinkServer):
         self._link_down = False
         self._assembler = LineAssembler()
         self._changed = threading.Condition()
+        self._listeners: list[ValListener] = []
         self.lines_handled = 0
+
+    def add_listener(self, listener: ValListener) -> None:
+        """Call ``listener(event, text)`` for every line run and every fault (see ValListener);
+        it runs on the serving thread and must be quick."""
+        self._listeners.append(listener)
+
+    def _tell(self, event: str, text: str) -> None:
+        for listener in self._listeners:
+            listener(event, text)
 
     def set_faults(self, faults: ValFaults) -> None:
         """Replace the fault knobs; restores a dropped link and ends a pending reply delay."""
@@ -119,14 +136,22 @@ class ValEmulator(LinkServer):
                     self._link_down = True
             if self._link_down:
                 logger.info("VAL emulator: link dropped after %d lines", self._lines_since_faults)
+                self._tell("fault", "link_drop")
                 self._assembler = LineAssembler()
                 link.hang_up()
                 return
             if self._on_line is not None:
                 self._on_line()
+            if faults.forced_error is not None:
+                self._tell("fault", "forced_error")
+            else:
+                self._tell("command", line)
             response = self._monitor.handle_line(line, faults.forced_error)
+            if faults.forced_error is None:
+                self._tell("done", line)
             link.write(response.echo)
             if faults.reply_delay_s > 0:
+                self._tell("fault", "reply_delay")
                 with self._changed:
                     self._changed.wait_for(
                         lambda f=faults: self._closing.is_set() or self._faults is not f,
@@ -134,4 +159,6 @@ class ValEmulator(LinkServer):
             with self._changed:  # counted before the reply leaves, so a client sees it
                 self._lines_since_faults += 1
                 self.lines_handled += 1
+            if faults.garbage:
+                self._tell("fault", "garbage")
             link.write(faults.garbage + response.reply)

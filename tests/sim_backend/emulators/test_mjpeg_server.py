@@ -122,3 +122,20 @@ def test_command_streams_the_simulated_hand_camera_until_sigterm():
         finally:
             process.send_signal(signal.SIGTERM)
         assert process.wait(10) == 0
+
+
+def test_gone_camera_ends_streams_and_refuses_requests_until_back(camera):
+    with MjpegServer(camera, fps=50) as server:
+        response = urllib.request.urlopen(server.stream_url, timeout=TIMEOUT_S)
+        read_part(response)
+        server.set_gone(True)
+        with response:
+            rest = response.read()  # the stream ends (else the socket times out)
+        assert rest.count(f"--{BOUNDARY}".encode()) <= 1
+        with pytest.raises(urllib.error.HTTPError) as info:
+            urllib.request.urlopen(server.stream_url, timeout=TIMEOUT_S)
+        assert info.value.code == 503
+        assert server.refused == 2
+        server.set_gone(False)
+        with urllib.request.urlopen(server.stream_url, timeout=TIMEOUT_S) as response:
+            assert decode_rgb(read_part(response)).shape == (144, 192, 3)
