@@ -201,6 +201,14 @@ def add_timing_option(parser: argparse.ArgumentParser, default: str | None = "re
                              f"{default or 'scene.timing of the config'})")
 
 
+def run_config_from_args(args):
+    """The config of ``--config`` with ``--timing`` and ``--part`` applied (``--part all``
+    leaves the part to the caller): what evaluate, table1 and demo run on."""
+    config = with_timing(config_from_args(args), args.timing)
+    part = getattr(args, "part", None)
+    return config if part in (None, ALL_PARTS) else with_part(config, part)
+
+
 def with_timing(config, mode: str | None):
     """``config`` with ``scene.timing`` replaced by ``mode`` (None: unchanged)."""
     if mode is None:

@@ -21,11 +21,9 @@ from controller.commands.common import (
     add_config_option,
     add_part_option,
     add_timing_option,
-    config_from_args,
     positive_int,
-    with_timing,
+    run_config_from_args,
 )
-from controller.config import with_part
 from controller.evaluation.metrics import summarise, wilson
 from controller.evaluation.plots import plot_convergence
 from controller.evaluation.trials import run_trials, train_on_default_scene, with_lighting
@@ -89,9 +87,7 @@ def write_replay(recording: Path) -> tuple[Path, Path]:
 
 def run(args) -> int:
     """Teach, acquire, train and evaluate gabor in good and poor light; write all to ``--out``."""
-    config = with_timing(config_from_args(args), args.timing)
-    if args.part is not None:
-        config = with_part(config, args.part)
+    config = run_config_from_args(args)
     out = Path(args.out)
     out.mkdir(parents=True, exist_ok=True)
     t0 = time.perf_counter()

@@ -42,13 +42,11 @@ from controller.commands.common import (
     ALL_PARTS,
     add_config_option,
     add_timing_option,
-    config_from_args,
     part_name_or_all,
     positive_int,
+    run_config_from_args,
     run_recorder,
-    with_timing,
 )
-from controller.config import with_part
 from controller.evaluation.mounts import evaluate_mounts
 from controller.evaluation.parts_table import parts_markdown, run_parts_table
 from controller.evaluation.trials import evaluate
@@ -61,13 +59,11 @@ from drivers.core.files import atomic_write_text, write_json
 
 def run(args) -> int:
     """Run ``trials.evaluate`` with the options and print the JSON report (also to ``--json``)."""
-    config = with_timing(config_from_args(args), args.timing)
+    config = run_config_from_args(args)
     if args.part == ALL_PARTS:
         return _evaluate_parts(args, config)
     if args.workers != 1:
         raise ConfigError("--workers: only with --part all")
-    if args.part is not None:
-        config = with_part(config, args.part)
     if args.mounts is not None:
         return _evaluate_mounts(args, config)
     log = IterationLog(args.log) if args.log else None

@@ -19,20 +19,16 @@ from controller.commands.common import (
     add_config_file_option,
     add_part_option,
     add_timing_option,
-    config_from_args,
     positive_int,
-    with_timing,
+    run_config_from_args,
 )
-from controller.config import with_part
 from controller.evaluation.comparison.table1 import LIGHTINGS, TABLE1_SYSTEMS, run_table1
 from controller.evaluation.comparison.table1_report import table1_markdown, write_table1
 
 
 def run(args) -> int:
     """Run Table 1, write its files to ``--out`` and print the Markdown table."""
-    config = with_timing(config_from_args(args), args.timing)
-    if args.part is not None:
-        config = with_part(config, args.part)
+    config = run_config_from_args(args)
     result = run_table1(config, trials=args.trials, seed=args.seed, workers=args.workers,
                         systems=TABLE1_SYSTEMS, lightings=LIGHTINGS, grasp=not args.no_grasp,
                         progress=not args.quiet)
