@@ -59,11 +59,14 @@ class Nn2GridConfig(GridConfig):
 @dataclass(frozen=True)
 class AcquisitionConfig:
     """Config section ``controller.acquisition``: the NN1 and NN2 training grids (paper
-    defaults) and the random test set."""
+    defaults), the random test set, and the frames each grid set first takes at the taught
+    pose itself (``taught_pose_frames``: NN1's zero is pinned on them and both networks
+    train on them, ``controller.teach.acquisition.acquire``)."""
 
     nn1: GridConfig = GridConfig()
     nn2: Nn2GridConfig = Nn2GridConfig()
     test_count: int = field(default=50, metadata={"min": 1})
+    taught_pose_frames: int = field(default=4, metadata={"min": 0})
 
 
 @dataclass(frozen=True)

@@ -157,7 +157,8 @@ class FinePositioner:
                        name=name, limits=self.config.safety,
                        ground_truth=self.devices.ground_truth if self.devices.cell else None,
                        metadata={"object_kind": state.object_kind, "kappa": state.kappa},
-                       progress=progress)
+                       progress=progress,
+                       taught_frames=0 if name == "test" else acq.taught_pose_frames)
         data.save(self.dataset_path(name))
         return data
 

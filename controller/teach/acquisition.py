@@ -55,12 +55,27 @@ def transfer(arm: Arm, target: Pose, max_step_mm: float, max_step_deg: float) ->
 def acquire(arm: Arm, camera: Camera, nominal: Pose, offsets: np.ndarray, *,
             name: str, metadata: dict | None = None, limits=None,
             ground_truth: Callable[[], tuple[float, float, float]] | None = None,
-            progress: bool = True) -> Dataset:
-    """Grab one image per displacement; returns the labelled dataset and returns to nominal."""
+            progress: bool = True, taught_frames: int = 0) -> Dataset:
+    """Grab one image per displacement; returns the labelled dataset and returns to nominal.
+
+    ``taught_frames``: that many frames are first grabbed at ``nominal`` itself (the arm is
+    moved there first), before the displacements. The loop settles at the taught pose, but
+    NN1's grid has one image there (NN1's zero was pinned on that one frame's camera noise)
+    and NN2's staggered grid none (``calibration_free.training``). The set's metadata
+    ``taught_frames`` says how many come first (the Hough system's PSOM takes the grid's
+    images only)."""
     max_mm = limits.max_step_mm if limits else 1e9
     max_deg = limits.max_step_deg if limits else 1e9
     images, labels, truth = [], [], []
     t0 = time.perf_counter()
+    if taught_frames > 0:
+        transfer(arm, nominal, max_mm, max_deg)
+        back = arm.pose().tool_step_to(nominal)
+        for _ in range(taught_frames):
+            images.append(camera.grab().image)
+            labels.append((back.dx_mm, back.dy_mm, back.dphi_deg))
+            if ground_truth is not None:
+                truth.append(ground_truth())
     # disable=None: tqdm draws only when stderr is a terminal (no \r spam in logs)
     for dx, dy, dphi in tqdm(offsets, desc=f"acquire {name}", unit="img",
                              disable=None if progress else True, leave=False):
@@ -73,7 +88,8 @@ def acquire(arm: Arm, camera: Camera, nominal: Pose, offsets: np.ndarray, *,
         if ground_truth is not None:
             truth.append(ground_truth())
     transfer(arm, nominal, max_mm, max_deg)
-    meta = {"set": name, "count": len(labels), "seconds": time.perf_counter() - t0,
+    meta = {"set": name, "count": len(labels), "taught_frames": max(taught_frames, 0),
+            "seconds": time.perf_counter() - t0,
             "nominal_pose": nominal.as_dict(), **(metadata or {})}
     samples = ([{"ground_truth_error": [float(v) for v in t]} for t in truth]
                if truth else None)

@@ -21,5 +21,5 @@ def trained(tmp_path_factory):
         fp.acquire("nn1", progress=False)
         fp.acquire("nn2", progress=False)
         model = fp.train()
-    assert model.train_images == 126
+    assert model.train_images == 2 * (63 + cfg.controller.acquisition.taught_pose_frames)
     return state

@@ -158,7 +158,10 @@ def train_hough(nn1_data: Dataset, nn2_data: Dataset, *, object_kind: str, kappa
     residual = [(amap(found["nn2"][i].angle_deg) - nn2_data.labels[i, 2] + 180.0 / kappa)
                 % (360.0 / kappa) - 180.0 / kappa for i in rot]
 
-    psom, phi_levels = _psom(nn1_data.labels, locs["nn1"], kappa)
+    # the PSOM's nodes are the grid's images: frames taken at the taught pose before the grid
+    # (``metadata["taught_frames"]``) are not nodes
+    first_node = int(nn1_data.metadata.get("taught_frames", 0))
+    psom, phi_levels = _psom(nn1_data.labels[first_node:], locs["nn1"][first_node:], kappa)
 
     training = {
         "samples": {name: len(d) for name, d in sets.items()},

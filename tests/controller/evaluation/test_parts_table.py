@@ -66,7 +66,7 @@ def test_every_part_is_trained_on_its_default_scene_and_reported(tmp_path, capsy
     for row in rows:
         assert row["object"] == row["part"] and row["kappa"] == PARTS[row["part"]].kappa
         assert row["trials"] == 2 and sum(row["outcomes"].values()) == 2
-        assert row["train_images"] == 54
+        assert row["train_images"] == 2 * (27 + 4)  # the grids and 4 frames at the taught pose
     # Trained on the nut, the nut is found (a cube model would see "no object" every time).
     assert all(r["outcomes"].get("no_object", 0) == 0 for r in rows if r["part"] == "nut")
     assert table == parts_markdown(report)
@@ -82,7 +82,7 @@ def test_evaluate_part_trains_and_tests_on_that_part(tmp_path, capsys):
                      "--no-grasp", "--quiet"]) == 0
     report = json.loads(capsys.readouterr().out)
     assert report["object"] == "ledge" and report["trials"] == 2
-    assert sum(report["outcomes"].values()) == 2 and report["train_images"] == 54
+    assert sum(report["outcomes"].values()) == 2 and report["train_images"] == 2 * (27 + 4)
     assert set(report["rms"]) >= {"1.5", "2.5", "3.5"} and "1.5" in report["safe_rate_ci"]
 
 

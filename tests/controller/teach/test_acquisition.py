@@ -65,3 +65,15 @@ def test_grid_for_staggers_the_nn2_grid_and_keeps_the_nn1_grid(kappa):
     assert np.abs(np.diff(nn2[:, :2], axis=0)).max() <= 5.0 + 1e-9
     b = grid_for(GridConfig(a_mm=5.0, b_deg=10.0, staggered=True), kappa)
     assert np.abs(b[:, 2]).max() < 10.0
+
+
+def test_frames_at_the_taught_pose_come_first_and_are_counted():
+    arm = active(FakeArm(start=NOMINAL.moved_in_tool_frame(ToolStep(3.0, 0.0, 0.0, 5.0))))
+    cam = active(FakeCamera())
+    offsets = np.array([[5.0, -5.0, 10.0], [-5.0, 0.0, -20.0]])
+    data = acquire(arm, cam, NOMINAL, offsets, name="t", progress=False, taught_frames=3)
+    assert len(data) == 5 and data.metadata["taught_frames"] == 3
+    np.testing.assert_allclose(data.labels[:3], 0.0, atol=1e-9)   # moved to nominal first
+    np.testing.assert_allclose(data.labels[3:, 2], offsets[:, 2], atol=1e-9)
+    assert acquire(arm, cam, NOMINAL, offsets, name="t",
+                   progress=False).metadata["taught_frames"] == 0

@@ -49,7 +49,9 @@ def test_nn2_retrained_on_stored_rois_is_train_bundles(tmp_path: Path):
     config = load_config(None)
     nn1, nn2, state = acquire_training_grids(config, 1, tmp_path, progress=False)
     data = prepare_repeat(_RepeatJob(0, 5, nn1, nn2, state, config), lambda n=1: None)
-    assert data.train.rois.shape == (63, 50, 50) and data.train.missed == 0
+    acq = config.controller.acquisition
+    assert data.train.rois.shape == (63 + acq.taught_pose_frames, 50, 50)
+    assert data.train.missed == 0
     assert data.test.rois.shape[0] + data.test.missed == config.controller.acquisition.test_count
     model = train_nn2(data, FILTER_SETS[PAPER_SET], config.perception)
     ours, theirs = model.model.nn2.to_arrays("nn2"), data.base.model.nn2.to_arrays("nn2")

@@ -28,7 +28,7 @@ def test_writes_one_evaluate_report_per_system_and_lighting(out):
     assert [(r["system"], r["lighting"]) for r in reports] == [
         (s, light) for s in ("gabor", "pca", "hough") for light in ("good", "poor")]
     for r in reports:
-        assert r["trials"] == TRIALS and r["seed"] == SEED and r["train_images"] == 126
+        assert r["trials"] == TRIALS and r["seed"] == SEED and r["train_images"] == 134
         assert sum(r["outcomes"].values()) == TRIALS
 
 
