@@ -47,19 +47,22 @@ DISPLAY_GAMMA = 2.2  # the renderer's output taken as display-referred with this
 # settling within about five frames. Industrial cameras deliver uncompressed frames (no JPEG),
 # and a colour sensor's mosaic is demosaiced at its full resolution, before binning: at
 # 192x144 no mosaic pattern is left (bayer: true demosaics at the delivered resolution, a
-# camera without binning).
+# camera without binning). Each pixel integrates the light over its area (the renderer takes
+# pixel_samples x pixel_samples samples a pixel and averages them): an edge across a pixel
+# gives a grey in between, so the part's outline moves in fractions of a pixel, as on a real
+# sensor; one sample a pixel snaps every edge to the pixel grid.
 REALISTIC = {
     "fov_deg": hand_camera.VFOV_DEG, "k1": -0.15, "k2": 0.03, "p1": 0.0005, "p2": -0.0005,
     "vignetting": 0.3, "blur_px": 0.5, "full_well_e": 6000.0, "gamma": 2.2, "bayer": False,
     "jpeg_quality": 0, "auto": True, "target_grey": 110.0, "speed": 0.5, "gain": 1.0,
-    "max_gain": 8.0,
+    "max_gain": 8.0, "pixel_samples": 2,
 }
 # Today's pinhole camera: no lens effects, fixed unit exposure, Gaussian noise only.
 IDEAL = {
     "fov_deg": hand_camera.VFOV_DEG, "k1": 0.0, "k2": 0.0, "p1": 0.0, "p2": 0.0,
     "vignetting": 0.0, "blur_px": 0.0, "full_well_e": 0.0, "gamma": DISPLAY_GAMMA,
     "bayer": False, "jpeg_quality": 0, "auto": False, "target_grey": 110.0, "speed": 0.5,
-    "gain": 1.0, "max_gain": 8.0,
+    "gain": 1.0, "max_gain": 8.0, "pixel_samples": 1,
 }
 PRESETS = {"realistic": REALISTIC, "ideal": IDEAL}
 _MIN_FACTOR = 0.02  # the smallest exposure x gain auto-exposure goes to
@@ -91,6 +94,7 @@ class CameraModel:
     speed: float
     gain: float
     max_gain: float
+    pixel_samples: int
 
     @property
     def ideal(self) -> bool:
@@ -130,7 +134,8 @@ def resolve_camera(config) -> CameraModel:
     lens, exposure = config.lens, config.exposure
     for source, names in ((lens, ("fov_deg", "k1", "k2", "p1", "p2", "vignetting", "blur_px")),
                           (exposure, ("auto", "target_grey", "speed", "gain", "max_gain")),
-                          (config, ("bayer", "jpeg_quality", "gamma", "full_well_e"))):
+                          (config, ("bayer", "jpeg_quality", "gamma", "full_well_e",
+                                    "pixel_samples"))):
         for name in names:
             value = getattr(source, name)
             if value is not None:

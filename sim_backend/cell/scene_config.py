@@ -158,7 +158,9 @@ class CameraConfig:
     ``realistic`` shot noise comes on top); full_well_e: electrons a pixel holds (sets the
     shot noise; 0: none); gamma: the camera's output gamma (2.2: the renderer's tone curve
     kept; 1: linear output); bayer: a Bayer colour mosaic demosaiced into RGB; jpeg_quality:
-    JPEG compression quality (0: none). mount: the change from the standard mount the cell
+    JPEG compression quality (0: none); pixel_samples: renderer samples per pixel side, averaged
+    (a sensor pixel integrates the light over its area; 1: one point sample a pixel, every edge
+    snapped to the pixel grid). mount: the change from the standard mount the cell
     is taught and trained with; test_mount: a different mount the cell is tested with
     (``finepos evaluate``: the camera knocked after training; None: the same).
     """
@@ -173,6 +175,7 @@ class CameraConfig:
     jpeg_quality: int | None = field(default=None, metadata={"min": 0, "max": 100})
     gamma: float | None = field(default=None, metadata={"min": 1.0, "max": 3.0})
     full_well_e: float | None = field(default=None, metadata={"min": 0.0, "max": 1e6})
+    pixel_samples: int | None = field(default=None, metadata={"min": 1, "max": 4})
 
     def __post_init__(self) -> None:
         from sim_backend.cell.optics import resolve_camera  # the presets live with the optics

@@ -19,6 +19,7 @@ import logging
 import math
 from dataclasses import dataclass
 
+import cv2
 import numpy as np
 
 from drivers.core.errors import MotionRejectedError
@@ -686,16 +687,24 @@ class SimCell:
             geometry = self._optics.geometry
             width, height = geometry.width_px, geometry.height_px
             projection = geometry.projection_matrix()
+        n = self.camera_model.pixel_samples
         _, _, rgba, depth, seg = p.getCameraImage(
-            width, height, hand_camera.view_matrix(self.camera_to_world()), projection,
+            width * n, height * n, hand_camera.view_matrix(self.camera_to_world()), projection,
             lightDirection=list(light.direction), lightColor=list(light.color),
             lightAmbientCoeff=light.ambient, lightDiffuseCoeff=light.diffuse,
             lightSpecularCoeff=light.specular, shadow=0, renderer=p.ER_TINY_RENDERER,
             physicsClientId=self._client)
-        shape = (height, width)
+        shape = (height * n, width * n)
         rgb = np.reshape(np.asarray(rgba, dtype=np.uint8), (*shape, 4))[:, :, :3]
-        return (rgb, np.reshape(np.asarray(depth, dtype=np.float32), shape),
-                np.reshape(np.asarray(seg, dtype=np.int32), shape))
+        depth = np.reshape(np.asarray(depth, dtype=np.float32), shape)
+        seg = np.reshape(np.asarray(seg, dtype=np.int32), shape)
+        if n > 1:
+            # each pixel integrates over its area (optics.REALISTIC); depth and the body ids,
+            # which only say what lies where, are the sample nearest the pixel's centre
+            rgb = cv2.resize(rgb, (width, height), interpolation=cv2.INTER_AREA)
+            depth = np.ascontiguousarray(depth[n // 2::n, n // 2::n])
+            seg = np.ascontiguousarray(seg[n // 2::n, n // 2::n])
+        return rgb, depth, seg
 
     def render(self, noisy: bool = True) -> np.ndarray:
         """What the hand camera sees: HxWx3 uint8 RGB (192x144), with cast shadows, through

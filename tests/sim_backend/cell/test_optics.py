@@ -196,3 +196,21 @@ def test_test_mount_replaces_the_mount_at_test():
     assert cam.at_test().mount.tilt_deg == 2.0 and cam.at_test().test_mount is None
     assert CameraConfig().at_test() == CameraConfig()
     assert dataclasses.replace(cam, exposure=ExposureConfig(auto=False)).lens == LensConfig()
+
+
+def test_each_pixel_integrates_over_its_area():
+    # realistic: 2 x 2 samples a pixel averaged; the part's outline gets greys in between
+    # its level and the table's, which one sample a pixel (ideal) never shows along an edge
+    assert optics.REALISTIC["pixel_samples"] == 2 and optics.IDEAL["pixel_samples"] == 1
+    scenes = {n: SceneConfig(camera=CameraConfig(preset="ideal", pixel_samples=n))
+              for n in (1, 2)}
+    grey = {}
+    for n, scene in scenes.items():
+        with SimCell(scene, seed=3) as cell:
+            assert cell.camera_model.pixel_samples == n
+            grey[n] = cell.render(noisy=False).max(axis=2).astype(np.int16)
+    levels = {n: len(np.unique(g)) for n, g in grey.items()}
+    assert levels[2] > levels[1]
+    assert np.abs(grey[2] - grey[1]).mean() < 3.0  # the same scene, only its edges differ
+    with pytest.raises(ConfigError, match="pixel_samples"):
+        from_mapping(CameraConfig, {"pixel_samples": 0}, "scene.camera")
