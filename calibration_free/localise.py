@@ -151,7 +151,8 @@ def otsu_threshold(values: np.ndarray, bins: int = 256) -> float:
 
 
 def subpixel_centre(normalised: np.ndarray, threshold: float, polarity: Polarity,
-                    u_px: float, v_px: float, area_px: float) -> tuple[float, float]:
+                    u_px: float, v_px: float, area_px: float,
+                    single_blob: bool = False) -> tuple[float, float]:
     """The blob's centre with its outline weighted by how much of each edge pixel it covers.
 
     The binary mask's centroid moves only when an edge crosses a pixel's centre, in whole
@@ -162,6 +163,8 @@ def subpixel_centre(normalised: np.ndarray, threshold: float, polarity: Polarity
     (the ring three pixels out, clear of the lens blur) to the part's (the blob's inside):
     the part's coverage of the pixel on a sensor that integrates over the pixel's area.
 
+    ``single_blob``: the whole mask holds this one blob (``localise``'s histogram path), so
+    the window needs no labelling; otherwise the window's largest blob is the part's.
     Returns the binary centre unchanged when the window holds no blob or no contrast.
     """
     height, width = normalised.shape
@@ -170,27 +173,35 @@ def subpixel_centre(normalised: np.ndarray, threshold: float, polarity: Polarity
     x0, x1 = max(cu - half, 0), min(cu + half + 1, width)
     y0, y1 = max(cv_ - half, 0), min(cv_ + half + 1, height)
     window = normalised[y0:y1, x0:x1]
-    signed = window - threshold if polarity == "bright" else threshold - window
-    n, labels, stats, _ = cv2.connectedComponentsWithStats((signed > 0).astype(np.uint8), 8)
-    if n < 2:
-        return u_px, v_px
-    blob = (labels == 1 + int(np.argmax(stats[1:, cv2.CC_STAT_AREA]))).astype(np.uint8)
+    signed = window - np.float32(threshold) if polarity == "bright" \
+        else np.float32(threshold) - window
+    blob = cv2.threshold(signed, 0.0, 1.0, cv2.THRESH_BINARY)[1].astype(np.uint8)
+    if single_blob:
+        if not blob.any():
+            return u_px, v_px
+    else:
+        n, labels, stats, _ = cv2.connectedComponentsWithStats(blob, 8)
+        if n < 2:
+            return u_px, v_px
+        blob = (labels == 1 + int(np.argmax(stats[1:, cv2.CC_STAT_AREA]))).astype(np.uint8)
     core = cv2.erode(blob, _KERNEL)
     band = cv2.dilate(blob, _KERNEL, iterations=2)
-    ring = cv2.dilate(band, _KERNEL) > band
-    if not core.any() or not ring.any():
+    ring = cv2.subtract(cv2.dilate(band, _KERNEL), band)
+    inside, outside = cv2.mean(signed, core)[0], cv2.mean(signed, ring)[0]
+    if not core.any() or not ring.any() or not inside > outside:
         return u_px, v_px
-    inside, outside = float(signed[core > 0].mean()), float(signed[ring].mean())
-    if not inside > outside:
-        return u_px, v_px
-    cover = np.clip((signed - outside) / (inside - outside), 0.0, 1.0)
-    weight = np.where(core > 0, 1.0, cover * (band > core))
+    # coverage in the band, 1 inside the core, 0 outside the band
+    weight = np.clip((signed - np.float32(outside)) * np.float32(1.0 / (inside - outside)),
+                     0.0, 1.0)
+    weight[band == 0] = 0.0
+    weight[core > 0] = 1.0
     total = float(weight.sum())
     if not total > 0:
         return u_px, v_px
-    cols, rows = weight.sum(axis=0), weight.sum(axis=1)
-    return (x0 + float(cols @ np.arange(cols.size)) / total,
-            y0 + float(rows @ np.arange(rows.size)) / total)
+    cols = cv2.reduce(weight, 0, cv2.REDUCE_SUM)[0]
+    rows = cv2.reduce(weight, 1, cv2.REDUCE_SUM)[:, 0]
+    return (x0 + float(cols @ _coords(cols.size)) / total,
+            y0 + float(rows @ _coords(rows.size)) / total)
 
 
 _KERNEL = np.ones((3, 3), np.uint8)
@@ -236,7 +247,8 @@ def localise(normalised: np.ndarray, threshold: float, expected_area_px: float |
                            blob_check=blob_check)
     if loc.status != "ok":
         return loc
-    u, v = subpixel_centre(normalised, threshold, polarity, loc.u_px, loc.v_px, loc.area_px)
+    u, v = subpixel_centre(normalised, threshold, polarity, loc.u_px, loc.v_px, loc.area_px,
+                           single_blob=loc.method == "histogram")
     return dataclasses.replace(loc, u_px=u, v_px=v)
 
 
