@@ -92,7 +92,8 @@ def run(args) -> int:
     out.mkdir(parents=True, exist_ok=True)
     t0 = time.perf_counter()
     with tempfile.TemporaryDirectory(prefix="finepos-demo-") as tmp:
-        print("teach-in (auto), acquisition of 2 x 63 images, training ...", file=sys.stderr)
+        print("teach-in (auto), acquisition of the nn1 and nn2 sets, training ...",
+              file=sys.stderr)
         model, acq = train_on_default_scene("gabor", config, Path(tmp) / "train", args.seed)
         model.model.save(out / "model-gabor.fpm")
         reports, curves, replays = {}, {}, []
