@@ -151,8 +151,8 @@ def otsu_threshold(values: np.ndarray, bins: int = 256) -> float:
 
 
 def subpixel_centre(normalised: np.ndarray, threshold: float, polarity: Polarity,
-                    u_px: float, v_px: float, area_px: float,
-                    single_blob: bool = False) -> tuple[float, float]:
+                    u_px: float, v_px: float, area_px: float, parts: np.ndarray,
+                    part: float) -> tuple[float, float]:
     """The blob's centre with its outline weighted by how much of each edge pixel it covers.
 
     The binary mask's centroid moves only when an edge crosses a pixel's centre, in whole
@@ -163,8 +163,9 @@ def subpixel_centre(normalised: np.ndarray, threshold: float, polarity: Polarity
     (the ring three pixels out, clear of the lens blur) to the part's (the blob's inside):
     the part's coverage of the pixel on a sensor that integrates over the pixel's area.
 
-    ``single_blob``: the whole mask holds this one blob (``localise``'s histogram path), so
-    the window needs no labelling; otherwise the window's largest blob is the part's.
+    ``parts`` is a full-frame image in which the part's pixels hold ``part``: the binary mask
+    and 1 when it holds the part alone, the connected components' labels and the part's
+    label otherwise (``localise`` has computed either).
     Returns the binary centre unchanged when the window holds no blob or no contrast.
     """
     height, width = normalised.shape
@@ -175,15 +176,7 @@ def subpixel_centre(normalised: np.ndarray, threshold: float, polarity: Polarity
     window = normalised[y0:y1, x0:x1]
     signed = window - np.float32(threshold) if polarity == "bright" \
         else np.float32(threshold) - window
-    blob = cv2.threshold(signed, 0.0, 1.0, cv2.THRESH_BINARY)[1].astype(np.uint8)
-    if single_blob:
-        if not blob.any():
-            return u_px, v_px
-    else:
-        n, labels, stats, _ = cv2.connectedComponentsWithStats(blob, 8)
-        if n < 2:
-            return u_px, v_px
-        blob = (labels == 1 + int(np.argmax(stats[1:, cv2.CC_STAT_AREA]))).astype(np.uint8)
+    blob = (parts[y0:y1, x0:x1] == part).astype(np.uint8)
     core = cv2.erode(blob, _KERNEL)
     band = cv2.dilate(blob, _KERNEL, iterations=2)
     ring = cv2.subtract(cv2.dilate(band, _KERNEL), band)
@@ -214,8 +207,8 @@ def localise(normalised: np.ndarray, threshold: float, expected_area_px: float |
              expected_uv: tuple[float, float] | None = None,
              blob_check: BlobCheck | None = None) -> Localisation:
     """Find the object's centre in a normalised image: the blob of the part's area and shape
-    in the binarised image (``_binary_localise``), its centre refined to sub-pixel by the
-    grey levels along its outline (``subpixel_centre``).
+    in the binarised image (its histograms, or its connected components), its centre refined
+    to sub-pixel by the grey levels along its outline (``subpixel_centre``).
 
     Args:
         normalised: HxW float32 image after ``preprocess.normalise``.
@@ -241,24 +234,6 @@ def localise(normalised: np.ndarray, threshold: float, expected_area_px: float |
         ImageError: the image is not HxW float32 or polarity is unknown.
         ConfigError: expected_area_px is not > 0.
     """
-    loc = _binary_localise(normalised, threshold, expected_area_px, polarity=polarity,
-                           area_tolerance=area_tolerance, min_blob_px=min_blob_px,
-                           max_elongation=max_elongation, expected_uv=expected_uv,
-                           blob_check=blob_check)
-    if loc.status != "ok":
-        return loc
-    u, v = subpixel_centre(normalised, threshold, polarity, loc.u_px, loc.v_px, loc.area_px,
-                           single_blob=loc.method == "histogram")
-    return dataclasses.replace(loc, u_px=u, v_px=v)
-
-
-def _binary_localise(normalised: np.ndarray, threshold: float,
-                     expected_area_px: float | None = None, *, polarity: Polarity = "bright",
-                     area_tolerance: float = AREA_TOLERANCE, min_blob_px: int = MIN_BLOB_PX,
-                     max_elongation: float = NO_ELONGATION_LIMIT,
-                     expected_uv: tuple[float, float] | None = None,
-                     blob_check: BlobCheck | None = None) -> Localisation:
-    """The binary part of ``localise``: the blob and its mask centroid (same arguments)."""
     if expected_area_px is not None and not expected_area_px > 0:
         raise ConfigError(f"expected_area_px: must be > 0, got {expected_area_px!r}")
     mask = binarise(normalised, threshold, polarity)
@@ -277,11 +252,17 @@ def _binary_localise(normalised: np.ndarray, threshold: float,
         if width and height and width * height <= MAX_BOX_TO_AREA * area and (
                 max_elongation == NO_ELONGATION_LIMIT
                 or elongation(mask[y0:y0 + height, x0:x0 + width]) <= max_elongation):
-            return Localisation("ok", float(cols @ _coords(cols.size)) / area,
-                                float(rows @ _coords(rows.size)) / area, area, "",
-                                "histogram")
-    return _by_components(mask, expected_area_px, area_tolerance, min_blob_px, max_elongation,
-                          expected_uv, blob_check)
+            u, v = subpixel_centre(normalised, threshold, polarity,
+                                   float(cols @ _coords(cols.size)) / area,
+                                   float(rows @ _coords(rows.size)) / area, area, mask, 1.0)
+            return Localisation("ok", u, v, area, "", "histogram")
+    loc, labels, label = _by_components(mask, expected_area_px, area_tolerance, min_blob_px,
+                                        max_elongation, expected_uv, blob_check)
+    if loc.status != "ok":
+        return loc
+    u, v = subpixel_centre(normalised, threshold, polarity, loc.u_px, loc.v_px, loc.area_px,
+                           labels, label)
+    return dataclasses.replace(loc, u_px=u, v_px=v)
 
 
 def _single_run(hist: np.ndarray) -> tuple[int, int]:
@@ -311,22 +292,25 @@ def elongation(mask: np.ndarray) -> float:
 def _by_components(mask: np.ndarray, expected_area_px: float | None, area_tolerance: float,
                    min_blob_px: int, max_elongation: float,
                    expected_uv: tuple[float, float] | None,
-                   blob_check: BlobCheck | None = None) -> Localisation:
+                   blob_check: BlobCheck | None = None) \
+        -> tuple[Localisation, np.ndarray, int]:
+    """The blob of the part among the mask's connected components (``localise``'s second
+    path), with the label image and the part's label (its binary centre, unrefined)."""
     n, labels, stats, centroids = cv2.connectedComponentsWithStatsWithAlgorithm(
         mask.astype(np.uint8), 8, cv2.CV_32S, cv2.CCL_BBDT)
     areas = stats[1:n, cv2.CC_STAT_AREA].astype(np.float64)
     blobs = np.flatnonzero(areas >= min_blob_px)
     if blobs.size == 0:
-        return Localisation("no_object", None, None, None,
-                            f"no blob of {min_blob_px} px or more", "components")
+        return (Localisation("no_object", None, None, None,
+                             f"no blob of {min_blob_px} px or more", "components"), labels, 0)
     if expected_area_px is None:
         order = blobs[np.argsort(areas[blobs])[::-1]]
         best = int(order[0])
         if order.size > 1 and areas[order[1]] >= AMBIGUITY_RATIO * areas[best]:
-            return Localisation(
+            return (Localisation(
                 "ambiguous", None, None, None,
                 f"the two largest blobs have similar areas ({areas[best]:.0f} and "
-                f"{areas[order[1]]:.0f} px)", "components")
+                f"{areas[order[1]]:.0f} px)", "components"), labels, 0)
         picked = best
     else:
         close = blobs[np.abs(areas[blobs] / expected_area_px - 1.0) <= area_tolerance]
@@ -334,16 +318,17 @@ def _by_components(mask: np.ndarray, expected_area_px: float | None, area_tolera
             shaped = [i for i in close
                       if _blob_elongation(labels, stats, int(i) + 1) <= max_elongation]
             if not shaped:
-                return Localisation(
+                return (Localisation(
                     "no_object", None, None, None,
                     f"{close.size} blob(s) of the expected area, none of the trained shape "
-                    f"(elongation above {max_elongation:.2f})", "components")
+                    f"(elongation above {max_elongation:.2f})", "components"), labels, 0)
             close = np.array(shaped, dtype=close.dtype)
         if close.size == 0:
-            return Localisation(
+            return (Localisation(
                 "no_object", None, None, None,
                 f"no blob within {area_tolerance:.0%} of the expected {expected_area_px:.0f} px"
-                f" (largest: {areas[blobs].max():.0f} px of {blobs.size} blobs)", "components")
+                f" (largest: {areas[blobs].max():.0f} px of {blobs.size} blobs)", "components"),
+                labels, 0)
         if blob_check is not None and close.size > 1:
             # Several candidates: those the check accepts (the part's colour) go first; with
             # none accepted, all stay and the nearest rule below decides.
@@ -354,17 +339,18 @@ def _by_components(mask: np.ndarray, expected_area_px: float | None, area_tolera
             nearest = _clearly_nearest(centroids[close + 1], expected_uv)
             if nearest is None:
                 found = ", ".join(f"{a:.0f}" for a in areas[close])
-                return Localisation(
+                return (Localisation(
                     "ambiguous", None, None, None,
                     f"{close.size} blobs match the expected {expected_area_px:.0f} px "
                     f"({found} px) and none is clearly nearest the taught position",
-                    "components")
+                    "components"), labels, 0)
             close = close[nearest:nearest + 1]
         picked = int(close[0])
     u, v = centroids[picked + 1]
     others = blobs.size - 1
-    return Localisation("ok", float(u), float(v), float(areas[picked]),
-                        f"picked among {others + 1} blobs" if others else "", "components")
+    return (Localisation("ok", float(u), float(v), float(areas[picked]),
+                         f"picked among {others + 1} blobs" if others else "", "components"),
+            labels, picked + 1)
 
 
 def _blob_passes(labels: np.ndarray, stats: np.ndarray, label: int, check: BlobCheck) -> bool:
