@@ -7,7 +7,7 @@ import pytest
 
 from calibration_free.angles import decode, encode
 from calibration_free.errors import TrainingError
-from calibration_free.mlp import NumpyMLP, train_mlp
+from calibration_free.mlp import NumpyMLP, Rprop, train_mlp
 
 
 def camera_map(uv: np.ndarray) -> np.ndarray:
@@ -62,6 +62,31 @@ def test_training_is_seeded_and_reproducible():
         np.testing.assert_array_equal(wa, wb)
     assert not np.array_equal(a.model.weights[0], c.model.weights[0])
     assert len(a.loss_curve) == 50 and a.seconds > 0
+
+
+def test_rprop_takes_the_library_optimisers_steps():
+    """The written-out Rprop gives torch.optim.Rprop's numbers, step for step, over sign
+    changes and the step limits."""
+    import torch
+
+    rng = np.random.default_rng(3)
+    start = [rng.normal(size=(4, 3)), rng.normal(size=4)]
+    mine = [torch.tensor(a, requires_grad=True) for a in start]
+    theirs = [torch.tensor(a, requires_grad=True) for a in start]
+    ours, library = Rprop(mine), torch.optim.Rprop(theirs)
+    target = torch.from_numpy(rng.normal(size=(5, 4)))
+    xs = torch.from_numpy(rng.normal(size=(5, 3)))
+
+    def loss(p):
+        return ((torch.tanh(torch.nn.functional.linear(xs, p[0], p[1])) - target) ** 2).sum()
+
+    for _ in range(60):
+        ours.step(list(torch.autograd.grad(loss(mine), mine)))
+        library.zero_grad()
+        loss(theirs).backward()
+        library.step()
+    for a, b in zip(mine, theirs, strict=True):
+        assert torch.equal(a, b)
 
 
 def test_numpy_inference_matches_the_unfolded_network():
