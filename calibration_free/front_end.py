@@ -17,6 +17,7 @@ from typing import Any
 import numpy as np
 
 from calibration_free.errors import ImageError
+from calibration_free.kernels import saturation_image
 from calibration_free.localise import (
     AREA_TOLERANCE,
     NO_ELONGATION_LIMIT,
@@ -27,7 +28,7 @@ from calibration_free.localise import (
 from calibration_free.preprocess import (
     Channel,
     IntensityStats,
-    max_and_saturation_u8,
+    check_rgb,
     max_channel_u8,
     normalise,
 )
@@ -117,17 +118,14 @@ class FrontEnd:
         Raises:
             ImageError: not HxWx3 uint8 of the training frames' size.
         """
-        if self.channel == "saturation":
-            gray, sat = max_and_saturation_u8(image)
-        else:
-            gray = max_channel_u8(image)
-        if gray.shape != (self.frame_height_px, self.frame_width_px):
+        check_rgb(image)
+        if image.shape[:2] != (self.frame_height_px, self.frame_width_px):
             raise ImageError(f"image: the model was trained on {self.frame_width_px}x"
-                             f"{self.frame_height_px} frames, got {gray.shape[1]}x"
-                             f"{gray.shape[0]}")
+                             f"{self.frame_height_px} frames, got {image.shape[1]}x"
+                             f"{image.shape[0]}")
         if self.channel == "saturation":
-            return sat.astype(np.float32)
-        return normalise(gray, self.intensity)
+            return saturation_image(np.ascontiguousarray(image))
+        return normalise(max_channel_u8(image), self.intensity)
 
     def localise(self, preprocessed: np.ndarray, image: np.ndarray | None = None
                  ) -> Localisation:

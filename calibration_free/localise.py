@@ -27,6 +27,7 @@ import cv2
 import numpy as np
 
 from calibration_free.errors import ImageError
+from calibration_free.kernels import coverage_moments, object_mask
 from drivers.core.errors import ConfigError
 
 Status = Literal["ok", "no_object", "ambiguous"]
@@ -79,17 +80,6 @@ class Localisation:
         return self.status == "ok"
 
 
-_COORDS: dict[int, np.ndarray] = {}
-
-
-def _coords(n: int) -> np.ndarray:
-    """0, 1, ..., n-1 as float64 (cached: the hot path must not allocate)."""
-    c = _COORDS.get(n)
-    if c is None:
-        c = _COORDS[n] = np.arange(n, dtype=np.float64)
-    return c
-
-
 def binarise(normalised: np.ndarray, threshold: float, polarity: Polarity = "bright") \
         -> np.ndarray:
     """Object mask of a normalised image: float32 1.0 where the object is, 0.0 elsewhere.
@@ -102,17 +92,8 @@ def binarise(normalised: np.ndarray, threshold: float, polarity: Polarity = "bri
     Raises:
         ImageError: the image is not a non-empty 2-D float32 array, or polarity is unknown.
     """
-    if not isinstance(normalised, np.ndarray) or normalised.dtype != np.float32 \
-            or normalised.ndim != 2 or normalised.size == 0:
-        raise ImageError(f"normalised image: expected HxW float32, got "
-                         f"{getattr(normalised, 'shape', None)} "
-                         f"{getattr(normalised, 'dtype', type(normalised))}")
-    if polarity == "bright":
-        kind = cv2.THRESH_BINARY
-    elif polarity == "dark":
-        kind = cv2.THRESH_BINARY_INV
-    else:
-        raise ImageError(f"polarity: must be bright or dark, got {polarity!r}")
+    _check_normalised(normalised)
+    kind = cv2.THRESH_BINARY if _check_polarity(polarity) else cv2.THRESH_BINARY_INV
     return cv2.threshold(normalised, threshold, 1.0, kind)[1]
 
 
@@ -150,9 +131,23 @@ def otsu_threshold(values: np.ndarray, bins: int = 256) -> float:
     return float(edges[1 + int(np.argmax(between))])
 
 
-def subpixel_centre(normalised: np.ndarray, threshold: float, polarity: Polarity,
-                    u_px: float, v_px: float, area_px: float, parts: np.ndarray,
-                    part: float) -> tuple[float, float]:
+def _check_normalised(normalised: np.ndarray) -> None:
+    if not isinstance(normalised, np.ndarray) or normalised.dtype != np.float32 \
+            or normalised.ndim != 2 or normalised.size == 0:
+        raise ImageError(f"normalised image: expected HxW float32, got "
+                         f"{getattr(normalised, 'shape', None)} "
+                         f"{getattr(normalised, 'dtype', type(normalised))}")
+
+
+def _check_polarity(polarity: Polarity) -> bool:
+    """True for a bright part."""
+    if polarity not in ("bright", "dark"):
+        raise ImageError(f"polarity: must be bright or dark, got {polarity!r}")
+    return polarity == "bright"
+
+
+def subpixel_centre(normalised: np.ndarray, polarity: Polarity, u_px: float, v_px: float,
+                    area_px: float, parts: np.ndarray, part: int) -> tuple[float, float]:
     """The blob's centre with its outline weighted by how much of each edge pixel it covers.
 
     The binary mask's centroid moves only when an edge crosses a pixel's centre, in whole
@@ -163,8 +158,8 @@ def subpixel_centre(normalised: np.ndarray, threshold: float, polarity: Polarity
     (the ring three pixels out, clear of the lens blur) to the part's (the blob's inside):
     the part's coverage of the pixel on a sensor that integrates over the pixel's area.
 
-    ``parts`` is a full-frame image in which the part's pixels hold ``part``: the binary mask
-    and 1 when it holds the part alone, the connected components' labels and the part's
+    ``parts`` is a full-frame image in which the part's pixels hold ``part``: the uint8 mask
+    and 255 when it holds the part alone, the connected components' labels and the part's
     label otherwise (``localise`` has computed either).
     Returns the binary centre unchanged when the window holds no blob or no contrast.
     """
@@ -174,30 +169,22 @@ def subpixel_centre(normalised: np.ndarray, threshold: float, polarity: Polarity
     x0, x1 = max(cu - half, 0), min(cu + half + 1, width)
     y0, y1 = max(cv_ - half, 0), min(cv_ + half + 1, height)
     window = normalised[y0:y1, x0:x1]
-    signed = window - np.float32(threshold) if polarity == "bright" \
-        else np.float32(threshold) - window
-    blob = (parts[y0:y1, x0:x1] == part).astype(np.uint8)
-    core = cv2.erode(blob, _KERNEL)
-    band = cv2.dilate(blob, _KERNEL, iterations=2)
-    ring = cv2.subtract(cv2.dilate(band, _KERNEL), band)
-    inside, outside = cv2.mean(signed, core)[0], cv2.mean(signed, ring)[0]
-    if not core.any() or not ring.any() or not inside > outside:
+    blob = parts[y0:y1, x0:x1]
+    if blob.dtype != np.uint8 or part != 255:
+        blob = cv2.compare(blob, part, cv2.CMP_EQ)
+    band = cv2.dilate(blob, _KERNEL_5)
+    m00, m10, m01 = coverage_moments(window, cv2.erode(blob, _KERNEL_3), band,
+                                     cv2.subtract(cv2.dilate(blob, _KERNEL_7), band),
+                                     polarity == "bright")
+    if not m00 > 0:
         return u_px, v_px
-    # coverage in the band, 1 inside the core, 0 outside the band
-    weight = np.clip((signed - np.float32(outside)) * np.float32(1.0 / (inside - outside)),
-                     0.0, 1.0)
-    weight[band == 0] = 0.0
-    weight[core > 0] = 1.0
-    total = float(weight.sum())
-    if not total > 0:
-        return u_px, v_px
-    cols = cv2.reduce(weight, 0, cv2.REDUCE_SUM)[0]
-    rows = cv2.reduce(weight, 1, cv2.REDUCE_SUM)[:, 0]
-    return (x0 + float(cols @ _coords(cols.size)) / total,
-            y0 + float(rows @ _coords(rows.size)) / total)
+    return x0 + m10 / m00, y0 + m01 / m00
 
 
-_KERNEL = np.ones((3, 3), np.uint8)
+_KERNEL_3 = np.ones((3, 3), np.uint8)
+# One dilation with these is two and three with the 3x3 square.
+_KERNEL_5 = np.ones((5, 5), np.uint8)
+_KERNEL_7 = np.ones((7, 7), np.uint8)
 
 
 def localise(normalised: np.ndarray, threshold: float, expected_area_px: float | None = None,
@@ -236,53 +223,49 @@ def localise(normalised: np.ndarray, threshold: float, expected_area_px: float |
     """
     if expected_area_px is not None and not expected_area_px > 0:
         raise ConfigError(f"expected_area_px: must be > 0, got {expected_area_px!r}")
-    mask = binarise(normalised, threshold, polarity)
-    # float32 sums of 0/1 are exact (counts stay far below 2**24); centroids are in float64
-    cols = cv2.reduce(mask, 0, cv2.REDUCE_SUM)[0]
-    rows = cv2.reduce(mask, 1, cv2.REDUCE_SUM)[:, 0]
-    area = float(cols.sum())
+    _check_normalised(normalised)
+    mask, moments, box = object_mask(np.ascontiguousarray(normalised), np.float32(threshold),
+                                     _check_polarity(polarity))
+    area = float(moments[0])
     if area < min_blob_px:
         return Localisation("no_object", None, None, None,
                             f"only {area:.0f} px beyond the threshold", "histogram")
     matches = expected_area_px is None or \
         abs(area / expected_area_px - 1.0) <= area_tolerance
     if matches:
-        x0, width = _single_run(cols)
-        y0, height = _single_run(rows)
+        # One blob: the mask's columns and rows each hold a single run, the box is compact
+        # for the area, and the shape is the part's.
+        _, width, _, height = box.tolist()
+        _, s_u, s_v, s_uu, s_vv, s_uv = moments.tolist()
+        u, v = s_u / area, s_v / area
         if width and height and width * height <= MAX_BOX_TO_AREA * area and (
                 max_elongation == NO_ELONGATION_LIMIT
-                or elongation(mask[y0:y0 + height, x0:x0 + width]) <= max_elongation):
-            u, v = subpixel_centre(normalised, threshold, polarity,
-                                   float(cols @ _coords(cols.size)) / area,
-                                   float(rows @ _coords(rows.size)) / area, area, mask, 1.0)
+                or _elongation(s_uu / area - u * u, s_vv / area - v * v,
+                               s_uv / area - u * v) <= max_elongation):
+            u, v = subpixel_centre(normalised, polarity, u, v, area, mask, 255)
             return Localisation("ok", u, v, area, "", "histogram")
     loc, labels, label = _by_components(mask, expected_area_px, area_tolerance, min_blob_px,
                                         max_elongation, expected_uv, blob_check)
     if loc.status != "ok":
         return loc
-    u, v = subpixel_centre(normalised, threshold, polarity, loc.u_px, loc.v_px, loc.area_px,
-                           labels, label)
+    u, v = subpixel_centre(normalised, polarity, loc.u_px, loc.v_px, loc.area_px, labels, label)
     return dataclasses.replace(loc, u_px=u, v_px=v)
-
-
-def _single_run(hist: np.ndarray) -> tuple[int, int]:
-    """(start, length) of the non-zero run of ``hist`` if there is exactly one run, else
-    (0, 0)."""
-    nz = hist > 0.0
-    first = int(nz.argmax())
-    last = hist.size - 1 - int(nz[::-1].argmax())
-    length = last - first + 1
-    return (first, length) if int(np.count_nonzero(nz)) == length else (0, 0)
 
 
 def elongation(mask: np.ndarray) -> float:
     """Major over minor axis of a binary blob (from its second central moments): 1 for a disc
-    or a square, about 4 for a 4:1 bar. Pass the blob's bounding box only: it is cheap there."""
-    mo = cv2.moments(mask, binaryImage=True)
+    or a square, about 4 for a 4:1 bar. The mask holds 0 and one other value (1 or 255: the
+    moments scale with it, their ratios do not). Pass the blob's bounding box only: it is
+    cheap there."""
+    mo = cv2.moments(mask)
     area = mo["m00"]
     if area <= 0:
         return NO_ELONGATION_LIMIT
-    mu20, mu02, mu11 = mo["mu20"] / area, mo["mu02"] / area, mo["mu11"] / area
+    return _elongation(mo["mu20"] / area, mo["mu02"] / area, mo["mu11"] / area)
+
+
+def _elongation(mu20: float, mu02: float, mu11: float) -> float:
+    """``elongation`` from the blob's central second moments over its area."""
     half_sum = (mu20 + mu02) / 2.0
     spread = float(np.hypot((mu20 - mu02) / 2.0, mu11))
     minor = half_sum - spread
@@ -297,7 +280,7 @@ def _by_components(mask: np.ndarray, expected_area_px: float | None, area_tolera
     """The blob of the part among the mask's connected components (``localise``'s second
     path), with the label image and the part's label (its binary centre, unrefined)."""
     n, labels, stats, centroids = cv2.connectedComponentsWithStatsWithAlgorithm(
-        mask.astype(np.uint8), 8, cv2.CV_32S, cv2.CCL_BBDT)
+        mask, 8, cv2.CV_32S, cv2.CCL_BBDT)
     areas = stats[1:n, cv2.CC_STAT_AREA].astype(np.float64)
     blobs = np.flatnonzero(areas >= min_blob_px)
     if blobs.size == 0:

@@ -1,0 +1,132 @@
+"""The per-frame loops of localisation, compiled (numba), each one pass over its pixels.
+
+The saturation image, the object mask with its column and row counts and moments, and the
+coverage-weighted centre were a dozen OpenCV and numpy calls each; at a few microseconds of
+call overhead apiece on a 192x144 frame that was most of the perception time. Every kernel
+gives what those calls gave (tests/calibration_free/test_kernels.py holds them against the
+OpenCV formulas).
+
+The kernels are compiled when this module is first imported and cached on disk (numba's
+cache: beside this file, else under ``NUMBA_CACHE_DIR`` or the user's cache folder); a cached
+import takes a fraction of a second, a first one a few seconds.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+from numba import njit
+
+from calibration_free.preprocess import SATURATION_FLOOR
+
+
+@njit("float32[:, ::1](uint8[:, :, ::1])", cache=True, nogil=True, error_model="numpy")
+def saturation_image(image: np.ndarray) -> np.ndarray:  # pragma: no cover
+    """(max - min) / max(max, floor) * 255 of an HxWx3 uint8 image, as HxW float32: the grey
+    levels of ``preprocess.max_and_saturation_u8`` (OpenCV's division rounds the float32
+    quotient half to even, as ``np.rint`` does)."""
+    height, width = image.shape[0], image.shape[1]
+    flat = image.reshape(height * width * 3)
+    out = np.empty(height * width, np.float32)
+    floor = np.uint8(SATURATION_FLOOR)
+    for k in range(height * width):
+        r, g, b = flat[3 * k], flat[3 * k + 1], flat[3 * k + 2]
+        top = max(r, g, b)
+        out[k] = np.rint(np.float32(top - min(r, g, b)) * np.float32(255.0)
+                         / np.float32(max(top, floor)))
+    return out.reshape(height, width)
+
+
+@njit("Tuple((uint8[:, ::1], float64[::1], int64[::1]))(float32[:, ::1], float32, boolean)",
+      cache=True, nogil=True, error_model="numpy")
+def object_mask(image: np.ndarray, threshold: np.float32, bright: bool):  # pragma: no cover
+    """The object mask (255 where the pixel is beyond the threshold: above it for a bright
+    part, at or below it for a dark one), its moments (count, sums of u, v, u*u, v*v, u*v;
+    pixel-centre coordinates) and its box (first column, width, first row, height; width and
+    height 0 unless the occupied columns, and the occupied rows, are one run each)."""
+    height, width = image.shape
+    mask = np.empty((height, width), np.uint8)
+    cols = np.zeros(width, np.int64)
+    n = 0
+    s_u = s_v = s_uu = s_vv = s_uv = 0.0
+    row_first = row_last = -1
+    rows_used = 0
+    for i in range(height):
+        count = 0
+        row_u = 0
+        row_uu = 0
+        for j in range(width):
+            inside = np.int64((image[i, j] > threshold) == bright)
+            mask[i, j] = np.uint8(255 * inside)
+            cols[j] += inside
+            count += inside
+            row_u += inside * j
+            row_uu += inside * j * j
+        if count:
+            n += count
+            s_u += row_u
+            s_uu += row_uu
+            s_v += i * count
+            s_vv += i * i * count
+            s_uv += i * row_u
+            rows_used += 1
+            if row_first < 0:
+                row_first = i
+            row_last = i
+    col_first = col_last = -1
+    cols_used = 0
+    for j in range(width):
+        if cols[j]:
+            cols_used += 1
+            if col_first < 0:
+                col_first = j
+            col_last = j
+    moments = np.empty(6, np.float64)
+    moments[0], moments[1], moments[2] = n, s_u, s_v
+    moments[3], moments[4], moments[5] = s_uu, s_vv, s_uv
+    box = np.zeros(4, np.int64)
+    if n and cols_used == col_last - col_first + 1 and rows_used == row_last - row_first + 1:
+        box[0], box[1] = col_first, cols_used
+        box[2], box[3] = row_first, rows_used
+    return mask, moments, box
+
+
+@njit("Tuple((float64, float64, float64))"
+      "(float32[:, :], uint8[:, :], uint8[:, :], uint8[:, :], boolean)", cache=True, nogil=True,
+      error_model="numpy")
+def coverage_moments(window: np.ndarray, core: np.ndarray, band: np.ndarray,
+                     ring: np.ndarray, bright: bool):  # pragma: no cover
+    """Moments (weight, sum of u * weight, sum of v * weight; window coordinates) of the
+    part's coverage: 1 in ``core``, in the rest of ``band`` the way from the ring's mean level
+    (the background) to the core's (the part), within 0..1, 0 elsewhere. All zero when core
+    or ring is empty or the part is not beyond the background (brighter for a bright part,
+    darker for a dark one)."""
+    height, width = window.shape
+    n_in = n_out = 0
+    s_in = s_out = 0.0
+    for i in range(height):
+        for j in range(width):
+            if core[i, j]:
+                n_in += 1
+                s_in += window[i, j]
+            elif ring[i, j]:
+                n_out += 1
+                s_out += window[i, j]
+    if n_in == 0 or n_out == 0:
+        return 0.0, 0.0, 0.0
+    inside, outside = s_in / n_in, s_out / n_out
+    if not ((inside > outside) if bright else (inside < outside)):
+        return 0.0, 0.0, 0.0
+    scale = 1.0 / (inside - outside)
+    m00 = m10 = m01 = 0.0
+    for i in range(height):
+        for j in range(width):
+            if core[i, j]:
+                w = 1.0
+            elif band[i, j]:
+                w = min(max((window[i, j] - outside) * scale, 0.0), 1.0)
+            else:
+                continue
+            m00 += w
+            m10 += w * j
+            m01 += w * i
+    return m00, m10, m01
