@@ -2,9 +2,10 @@
 
 Format: a finepos model file (``calibration_free.model_file``: safetensors, so loading cannot
 execute code; a JSON header; a sha256 over both) of kind ``gabor``. Arrays: the networks
-(``nn1.*``, ``nn1_rot.*``, ``nn2.*``, see ``NumpyMLP.to_arrays``). JSON: object kind, kappa,
-nominal pose, the front end (``frame_px``, ``intensity``, ``localisation``: see
-``FrontEnd.to_info``), Gabor configuration, training metadata.
+(``nn1.*``, ``nn1_rot.*``, ``nn1_near.*``, ``nn2.*``, see ``NumpyMLP.to_arrays``). JSON:
+object kind, kappa, nominal pose, the front end (``frame_px``, ``intensity``,
+``localisation``: see ``FrontEnd.to_info``), Gabor configuration, ``near_mm``, training
+metadata.
 
 Saving is atomic. Loading returns a new bundle or raises BundleError; it never modifies
 anything, so a failed load leaves the caller's current bundle in place.
@@ -27,7 +28,7 @@ from drivers.core.pose import Pose
 from drivers.core.typed_config import from_mapping, to_mapping
 
 KIND = "gabor"
-FORMAT_VERSION = 4  # 2: max_elongation; 3: channel, nominal_uv_px; 4: nn1_rot
+FORMAT_VERSION = 5  # 2: max_elongation; 3: channel, nominal_uv_px; 4: nn1_rot; 5: nn1_near
 POSE_KEYS = ("x_mm", "y_mm", "z_mm", "o_deg", "a_deg", "t_deg")
 
 
@@ -45,8 +46,13 @@ class ModelBundle(TaughtModel):
             taught pose (``nominal_uv_px``, required here).
         gabor: the filter-bank configuration NN2's inputs come from.
         nn1: (u_px, v_px) -> (dx_mm, dy_mm) (half loops).
-        nn1_rot: (u_px, v_px, sin(kappa dphi), cos(kappa dphi)) -> (dx_mm, dy_mm) (full
-            loops, which know the rotation from NN2).
+        nn1_rot: (u_px, v_px, sin(kappa dphi), cos(kappa dphi)) -> (dx_mm, dy_mm) over the
+            whole training range (every look's translation, which knows the rotation from
+            NN2).
+        nn1_near: a correction of ``nn1_rot`` on the same inputs, fitted to its error on the
+            samples near the taught pose (the NN2 set's range); added where ``nn1_rot`` reads
+            at most ``near_mm``: where the loop makes its full loops and settles.
+        near_mm: up to this translation (nn1_rot's reading, mm) the correction is added.
         nn2: Gabor features -> (sin(kappa dphi), cos(kappa dphi)).
         training: JSON-able training metadata (loss curves, seconds, sample counts, seed).
         format_version: file format version this bundle follows.
@@ -54,10 +60,15 @@ class ModelBundle(TaughtModel):
 
     file_kind: ClassVar[str] = KIND
     file_version: ClassVar[int] = FORMAT_VERSION
+    # A version-4 file has no near net: it loads with nn1_rot in its place, never used
+    # (near_mm 0), so it perceives as it did.
+    older_versions: ClassVar[tuple[int, ...]] = (4,)
 
     gabor: GaborConfig
     nn1: NumpyMLP
     nn1_rot: NumpyMLP
+    nn1_near: NumpyMLP
+    near_mm: float
     nn2: NumpyMLP
     format_version: int = FORMAT_VERSION
 
@@ -77,9 +88,14 @@ class ModelBundle(TaughtModel):
         if self.nn1.layer_sizes[0] != 2 or self.nn1.n_outputs != 2:
             raise BundleError(f"nn1: must map 2 inputs to 2 outputs, has layers "
                               f"{self.nn1.layer_sizes}")
-        if self.nn1_rot.layer_sizes[0] != 4 or self.nn1_rot.n_outputs != 2:
-            raise BundleError(f"nn1_rot: must map 4 inputs to 2 outputs, has layers "
-                              f"{self.nn1_rot.layer_sizes}")
+        for name in ("nn1_rot", "nn1_near"):
+            net = getattr(self, name)
+            if net.layer_sizes[0] != 4 or net.n_outputs != 2:
+                raise BundleError(f"{name}: must map 4 inputs to 2 outputs, has layers "
+                                  f"{net.layer_sizes}")
+        if isinstance(self.near_mm, bool) or not isinstance(self.near_mm, (int, float)) \
+                or not (math.isfinite(self.near_mm) and self.near_mm >= 0.0):
+            raise BundleError(f"near_mm: must be a finite number >= 0, got {self.near_mm!r}")
         if self.nn2.n_inputs != self.gabor.n_filters or self.nn2.n_outputs != 2:
             raise BundleError(f"nn2: must map {self.gabor.n_filters} features to 2 outputs, "
                               f"has layers {self.nn2.layer_sizes}")
@@ -90,28 +106,33 @@ class ModelBundle(TaughtModel):
         return Pose(**self.nominal_pose)
 
     def system_info(self) -> dict[str, Any]:
-        """The Gabor system's own JSON: the filter-bank configuration (``gabor``).
+        """The Gabor system's own JSON: the filter-bank configuration (``gabor``) and where
+        the near translation net takes over (``near_mm``).
 
         Returns:
-            {"gabor": ...}, merged into the file's JSON by ``to_info``.
+            {"gabor": ..., "near_mm": ...}, merged into the file's JSON by ``to_info``.
         """
-        return {"gabor": to_mapping(self.gabor)}
+        return {"gabor": to_mapping(self.gabor), "near_mm": float(self.near_mm)}
 
     def arrays(self) -> dict[str, np.ndarray]:
         """The networks' weights as named arrays (what the file stores besides the JSON).
 
         Returns:
-            ``nn1.*``, ``nn1_rot.*`` and ``nn2.*`` (``NumpyMLP.to_arrays``).
+            ``nn1.*``, ``nn1_rot.*``, ``nn1_near.*`` and ``nn2.*`` (``NumpyMLP.to_arrays``).
         """
         return {**self.nn1.to_arrays("nn1"), **self.nn1_rot.to_arrays("nn1_rot"),
-                **self.nn2.to_arrays("nn2")}
+                **self.nn1_near.to_arrays("nn1_near"), **self.nn2.to_arrays("nn2")}
 
     @classmethod
     def from_file(cls, info: dict[str, Any], arrays: dict[str, np.ndarray],
                   taught: dict[str, Any]) -> ModelBundle:
         """A bundle from a model file's contents (see ``TaughtModel.from_file``)."""
+        nn1_rot = NumpyMLP.from_arrays(arrays, "nn1_rot")
+        if info["format_version"] == 4:
+            nn1_near, near_mm = nn1_rot, 0.0
+        else:
+            nn1_near, near_mm = NumpyMLP.from_arrays(arrays, "nn1_near"), info["near_mm"]
         return cls(**taught, gabor=from_mapping(GaborConfig, info["gabor"], "gabor"),
-                   nn1=NumpyMLP.from_arrays(arrays, "nn1"),
-                   nn1_rot=NumpyMLP.from_arrays(arrays, "nn1_rot"),
-                   nn2=NumpyMLP.from_arrays(arrays, "nn2"),
+                   nn1=NumpyMLP.from_arrays(arrays, "nn1"), nn1_rot=nn1_rot,
+                   nn1_near=nn1_near, near_mm=near_mm, nn2=NumpyMLP.from_arrays(arrays, "nn2"),
                    format_version=info["format_version"])

@@ -84,9 +84,10 @@ def write_model(path: str | Path, kind: str, version: int, info: dict[str, Any],
     atomic_write_bytes(path, data)
 
 
-def read_model(path: str | Path, kind: str, version: int) \
+def read_model(path: str | Path, kind: str, version: int, older: tuple[int, ...] = ()) \
         -> tuple[dict[str, Any], dict[str, np.ndarray]]:
-    """Read and check a model file written by ``write_model``.
+    """Read and check a model file written by ``write_model``: of format ``version``, or of
+    one of the ``older`` versions the caller still reads.
 
     Returns:
         The JSON metadata (with "format", "kind", "format_version") and the arrays.
@@ -116,7 +117,7 @@ def read_model(path: str | Path, kind: str, version: int) \
         raise BundleError(f"{path}: not a finepos model file")
     if info.get("kind") != kind:
         raise BundleError(f"{path}: a {info.get('kind')!r} model, not a {kind!r} model")
-    if info.get("format_version") != version:
+    if info.get("format_version") != version and info.get("format_version") not in older:
         raise BundleError(f"{path}: {kind} model format version "
                           f"{info.get('format_version')!r} is not supported (this finepos "
                           f"reads version {version}); retrain the model")
@@ -176,7 +177,8 @@ class TaughtModel(ABC):
 
     Attributes:
         file_kind: (class) the system's name in the file (``gabor``, ``pca``, ``hough``).
-        file_version: (class) that system's model format version (others are refused).
+        file_version: (class) that system's model format version (it writes).
+        older_versions: (class) earlier versions it still reads (others are refused).
         object_kind: what was taught, e.g. "cube"; checked by ``load(expect_object=...)``.
         kappa: rotational symmetry count of the object (4 for the cube).
         nominal_pose: the taught pose, {x_mm, y_mm, z_mm, o_deg, a_deg, t_deg}.
@@ -186,6 +188,7 @@ class TaughtModel(ABC):
 
     file_kind: ClassVar[str]
     file_version: ClassVar[int]
+    older_versions: ClassVar[tuple[int, ...]] = ()
     object_kind: str
     kappa: int
     nominal_pose: dict[str, float]
@@ -260,7 +263,7 @@ class TaughtModel(ABC):
                 format version, inconsistent, or taught on another object than
                 ``expect_object``.
         """
-        info, arrays = read_model(path, cls.file_kind, cls.file_version)
+        info, arrays = read_model(path, cls.file_kind, cls.file_version, cls.older_versions)
         try:
             taught = {"object_kind": str(info["object_kind"]), "kappa": info["kappa"],
                       "nominal_pose": nominal_pose_of(info), "front": FrontEnd.from_info(info),

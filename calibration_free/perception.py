@@ -8,6 +8,7 @@ dphi) -> dphi, and the full loop's translation. ``perceive`` is both in one pass
 
 from __future__ import annotations
 
+import math
 import time
 from dataclasses import dataclass, field
 
@@ -32,9 +33,13 @@ class Percept:
         dphi_deg: the corrective rotation decoded from nn2_sc; None like ``features``.
         timings_us: microseconds per stage (preprocess, localise, roi, features, nn1, nn2,
             total); stages not run are absent.
-        full_mm: the full loop's translation, from (u, v) and NN2's rotation (the bundle's
-            ``nn1_rot``); None like ``features``.
+        full_mm: the translation from (u, v) and NN2's rotation: ``nn1_rot``'s reading, with
+            the bundle's ``nn1_near`` correction added where it reads at most the bundle's
+            ``near_mm``; None like ``features``.
         normalised: the preprocessed frame the ROI is cut from (kept for ``rotation``).
+        rot_mm: ``nn1_rot``'s reading (without the near correction); None like
+            ``features``.
+        near: ``full_mm`` has the near correction.
     """
 
     localisation: Localisation
@@ -45,6 +50,8 @@ class Percept:
     timings_us: dict[str, float]
     full_mm: tuple[float, float] | None = None
     normalised: np.ndarray | None = field(default=None, repr=False, compare=False)
+    rot_mm: tuple[float, float] | None = None
+    near: bool = False
 
     @property
     def ok(self) -> bool:
@@ -129,14 +136,20 @@ class Perception:
         s, c = self.bundle.nn2(features)
         dphi = angles.decode(float(s), float(c), self.bundle.kappa)
         norm = max(float(np.hypot(s, c)), 1e-9)
-        dx_rot, dy_rot = self.bundle.nn1_rot(
-            np.array((loc.u_px, loc.v_px, float(s) / norm, float(c) / norm)))
+        inputs = np.array((loc.u_px, loc.v_px, float(s) / norm, float(c) / norm))
+        dx_rot, dy_rot = self.bundle.nn1_rot(inputs)
+        rot_mm = (float(dx_rot), float(dy_rot))
+        near = math.hypot(*rot_mm) <= self.bundle.near_mm
+        full_mm = rot_mm
+        if near:
+            cx, cy = self.bundle.nn1_near(inputs)
+            full_mm = (rot_mm[0] + float(cx), rot_mm[1] + float(cy))
         t6 = clock()
         timings = dict(percept.timings_us)
         timings.update(roi=(t4 - t3) / 1e3, features=(t5 - t4) / 1e3, nn2=(t6 - t5) / 1e3,
                        total=timings["total"] + (t6 - t3) / 1e3)
         return Percept(loc, percept.nn1_mm, features, (float(s), float(c)), dphi, timings,
-                       (float(dx_rot), float(dy_rot)), percept.normalised)
+                       full_mm, percept.normalised, rot_mm, near)
 
     def perceive(self, image: np.ndarray) -> Percept:
         """The whole path in one pass: corrective translation (NN1) and rotation (NN2).

@@ -32,9 +32,11 @@ class GaborEstimator:
         The translation is ``nn1_rot``'s, which knows the part's rotation: the silhouette's
         centre moves with the part's turn (for a part without symmetry, a screw, by several
         millimetres), which NN1 on (u, v) alone takes for a translation, so its reading sends a
-        half loop millimetres off and misjudges r_fine. The 36 features and NN2 cost a few
-        tens of microseconds a frame. The record keeps both readings: ``nn1_rot`` (the
-        translation returned) and NN1's own (``nn1``).
+        half loop millimetres off and misjudges r_fine; near the taught pose (``nn1_rot``
+        reading at most the bundle's ``near_mm``) the near net's correction is added
+        (``nn1_near``). The 36 features and NN2 cost a few tens of microseconds a frame. The
+        record keeps the readings: ``nn1_rot``, ``nn1_near`` (the corrected translation
+        returned, when the correction was added) and NN1's own (``nn1``).
         """
         p = self.perception.perceive(image)
         loc = p.localisation
@@ -43,7 +45,7 @@ class GaborEstimator:
                                        record={"area_px": loc.area_px}, percept=p)
         return TranslationEstimate("ok", p.full_mm[0], p.full_mm[1], loc.u_px, loc.v_px,
                                    record={"area_px": loc.area_px, "nn1": list(p.nn1_mm),
-                                           "nn1_rot": list(p.full_mm),
+                                           **_translation_readings(p),
                                            "perception_us": p.timings_us}, percept=p)
 
     def estimate_rotation(self, translation: TranslationEstimate) -> RotationEstimate:
@@ -53,8 +55,17 @@ class GaborEstimator:
         if p.dphi_deg is None:
             p = self.perception.rotation(p)
         return RotationEstimate(p.dphi_deg, record={
-            "features": p.features.tolist(), "nn2": list(p.nn2_sc), "nn1_rot": list(p.full_mm),
+            "features": p.features.tolist(), "nn2": list(p.nn2_sc), **_translation_readings(p),
             "perception_us": p.timings_us}, dx_mm=p.full_mm[0], dy_mm=p.full_mm[1])
+
+
+def _translation_readings(p: Percept) -> dict[str, Any]:
+    """The rotation-aware nets' readings for the iteration record: ``nn1_rot``'s, and the
+    translation with the near net's correction when it was added."""
+    readings: dict[str, Any] = {"nn1_rot": list(p.rot_mm)}
+    if p.near:
+        readings["nn1_near"] = list(p.full_mm)
+    return readings
 
 
 class GaborSystem(VisionSystem):

@@ -25,12 +25,12 @@ def test_round_trip_keeps_everything(bundle, cell, tmp_path):
     again = ModelBundle.load(path, expect_object="cube")
     assert [p.name for p in tmp_path.iterdir()] == ["cube.bundle"]
     for f in dataclasses.fields(ModelBundle):
-        if f.name not in ("nn1", "nn1_rot", "nn2"):
+        if f.name not in ("nn1", "nn1_rot", "nn1_near", "nn2"):
             assert getattr(again, f.name) == getattr(bundle, f.name), f.name
     assert again.kappa == KAPPA and again.nominal_pose == NOMINAL_POSE
     assert again.format_version == FORMAT_VERSION
     assert again.pose.as_dict() == NOMINAL_POSE
-    for name in ("nn1", "nn1_rot", "nn2"):
+    for name in ("nn1", "nn1_rot", "nn1_near", "nn2"):
         a, b = getattr(bundle, name).to_arrays(name), getattr(again, name).to_arrays(name)
         assert a.keys() == b.keys()
         for k in a:
@@ -109,19 +109,24 @@ def version_4_info(bundle: ModelBundle) -> dict:
 
 def test_a_file_in_the_version_4_layout_loads_and_is_still_written(bundle, cell, tmp_path):
     path = tmp_path / "v4.bundle"
-    path.write_bytes(pack(version_4_info(bundle), bundle.arrays(), version=4))
+    arrays = {k: v for k, v in bundle.arrays().items() if not k.startswith("nn1_near.")}
+    path.write_bytes(pack(version_4_info(bundle), arrays, version=4))
     old = ModelBundle.load(path, expect_object="cube")
     # a version-4 file has no learned colour: the same front end without the colour check
     assert old.front.chroma is None and bundle.front.chroma is not None
     assert old.front == dataclasses.replace(bundle.front, chroma=None, chroma_tolerance=0.0)
     assert old.training == {"seed": 0}
+    # no near net: every look's translation is nn1_rot's, as version 4 perceived
+    assert old.near_mm == 0.0 and old.format_version == 4
     frame = render(cell, np.array([-1.5, 2.0, 8.0]), np.random.default_rng(2))
     p, q = Perception(bundle).perceive(frame), Perception(old).perceive(frame)
-    assert (p.nn1_mm, p.full_mm, p.nn2_sc, p.dphi_deg) == (q.nn1_mm, q.full_mm, q.nn2_sc,
-                                                            q.dphi_deg)
-    written = bundle.to_info()  # and saving writes the same layout, plus the part's colour
+    assert p.near and not q.near and q.full_mm == q.rot_mm
+    assert (p.nn1_mm, p.rot_mm, p.nn2_sc, p.dphi_deg) == (q.nn1_mm, q.rot_mm, q.nn2_sc,
+                                                           q.dphi_deg)
+    # saving writes the same layout, plus the part's colour and the near net's range
+    written = bundle.to_info()
     expected = version_4_info(bundle)
-    assert sorted(written) == sorted(expected)
+    assert sorted(written) == sorted([*expected, "near_mm"])
     assert written["localisation"] == {**expected["localisation"],
                                        "chroma": list(bundle.front.chroma),
                                        "chroma_tolerance": bundle.front.chroma_tolerance}

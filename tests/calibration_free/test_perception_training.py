@@ -12,7 +12,12 @@ from calibration_free.dataset import Dataset, random_offsets
 from calibration_free.errors import ImageError, TrainingError
 from calibration_free.perception import Perception
 from calibration_free.synthetic import render, render_at
-from calibration_free.training import default_nn2_weight_decay, train_bundle
+from calibration_free.training import (
+    MIN_NEAR_SAMPLES,
+    default_nn2_weight_decay,
+    near_samples,
+    train_bundle,
+)
 
 from .conftest import KAPPA, NOMINAL_POSE
 
@@ -50,8 +55,36 @@ def test_training_records_what_it_did(bundle):
     assert bundle.object_kind == "cube" and bundle.nominal_pose == NOMINAL_POSE
     # the rotation-aware translation net: (u, v, sin, cos) -> 10 tanh units -> (dx, dy)
     assert t["nn1_rot"]["layers"] == [4, 10, 2]
+    # the same net on the samples near the taught pose: the NN2 grid (+/-5 mm) and NN1's
+    # grid centre, not NN1's grid at +/-25 mm
+    assert t["nn1_near"]["layers"] == [4, 10, 2] and bundle.near_mm == 5.0
+    assert t["nn1_near"]["samples"] == 63 + 7
     assert t["nn2"]["weight_decay"] == default_nn2_weight_decay(KAPPA)
     assert 700 < bundle.front.expected_area_px < 950  # a 30 px rounded square minus its hole
+
+
+def test_the_near_net_gives_the_translation_only_near_the_taught_pose(bundle, cell):
+    rng = np.random.default_rng(6)
+    for offset, near in (((1.5, -2.0, 10.0), True), ((3.0, 3.0, -20.0), True),
+                         ((15.0, -12.0, 5.0), False)):
+        p = Perception(bundle).perceive(render(cell, np.array(offset), rng))
+        assert p.near == near and (np.hypot(*p.rot_mm) <= bundle.near_mm) == near
+        if near:  # both read the offset; the near net is the one fitted there
+            assert np.allclose(p.full_mm, offset[:2], atol=0.3)
+            assert np.allclose(p.full_mm, p.rot_mm, atol=0.5)
+        else:
+            assert p.full_mm == p.rot_mm
+
+
+def test_near_samples_are_the_nn2_sets_range():
+    nn2 = np.array([[5.0, -5.0, 0.0], [-5.0, 2.0, 10.0], [0.0, 0.0, 0.0]])
+    dxdy = np.array([[0.0, 0.0], [5.0, 5.0], [5.5, 5.5], [25.0, 0.0], [0.0, -25.0]])
+    near_mm, near = near_samples(np.repeat(dxdy, MIN_NEAR_SAMPLES, axis=0), nn2)
+    assert near_mm == 5.0  # the corner (7.07 mm) plus 1 mm still holds (5.5, 5.5)
+    assert near.reshape(-1, MIN_NEAR_SAMPLES)[:, 0].tolist() == [True, True, True, False,
+                                                                  False]
+    with pytest.raises(TrainingError, match="within 5.0 mm of the taught pose"):
+        near_samples(dxdy, nn2)
 
 
 def test_nn2_weight_decay_is_looser_for_a_part_without_symmetry():
@@ -183,6 +216,7 @@ def test_nn1_reads_zero_at_the_taught_pose(bundle, saturation_bundle, cell):
         assert np.hypot(*p.nn1_mm) < 0.05 and np.hypot(*p.full_mm) < 0.05
         assert b.training["nn1"]["zero_offset_mm"] is not None
         assert b.training["nn1_rot"]["zero_offset_mm"] is not None
+        assert p.near and b.training["nn1_near"]["zero_offset_mm"] is not None
 
 
 def test_clearly_nearest_of_two_matching_blobs_is_taken(bundle, cell):
