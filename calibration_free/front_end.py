@@ -32,7 +32,12 @@ from calibration_free.preprocess import (
     max_channel_u8,
     normalise,
 )
+from calibration_free.roi import above, extract_roi
 from drivers.core.errors import ConfigError
+
+# In the saturation channel the Gabor features see only what stands above this fraction of
+# the part's threshold (``FrontEnd.feature_roi``).
+FEATURE_FLOOR = 0.75
 
 
 @dataclass(frozen=True)
@@ -126,6 +131,22 @@ class FrontEnd:
         if self.channel == "saturation":
             return saturation_image(np.ascontiguousarray(image))
         return normalise(max_channel_u8(image), self.intensity)
+
+    def feature_roi(self, preprocessed: np.ndarray, loc: Localisation,
+                    size_px: int) -> np.ndarray:
+        """The ROI the Gabor features are computed on: the ``size_px`` square of the
+        preprocessed image centred on the part found in it (``roi.extract_roi``); in the
+        saturation channel with everything up to ``FEATURE_FLOOR`` times the part's
+        threshold taken off (``roi.above``), the same in training and in the loop.
+
+        Saturation is near zero on a grey table in good light, but camera noise in a dark
+        frame and a warm lamp raise it over the whole table, and a cast shadow beside the
+        part shows as a patch: the features would read that as part of the part's shape.
+        """
+        roi = extract_roi(preprocessed, loc.u_px, loc.v_px, size_px)
+        if self.channel != "saturation":
+            return roi
+        return above(roi, FEATURE_FLOOR * self.threshold)
 
     def localise(self, preprocessed: np.ndarray, image: np.ndarray | None = None
                  ) -> Localisation:

@@ -18,7 +18,6 @@ from calibration_free import angles
 from calibration_free.bundle import ModelBundle
 from calibration_free.gabor import GaborBank
 from calibration_free.localise import Localisation
-from calibration_free.roi import extract_roi
 
 
 @dataclass(frozen=True)
@@ -129,7 +128,7 @@ class Perception:
         clock = time.perf_counter_ns
         t3 = clock()
         loc = percept.localisation
-        roi = extract_roi(percept.normalised, loc.u_px, loc.v_px, self._roi_px)
+        roi = self._front.feature_roi(percept.normalised, loc, self._roi_px)
         t4 = clock()
         features = self._bank.features(roi)
         t5 = clock()

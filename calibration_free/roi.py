@@ -51,3 +51,8 @@ def extract_roi(normalised: np.ndarray, u_px: float, v_px: float, size_px: int =
     if not isinstance(size_px, int) or size_px < 1:
         raise ImageError(f"ROI size must be a positive integer, got {size_px!r}")
     return cv2.getRectSubPix(normalised, (size_px, size_px), (float(u_px), float(v_px)))
+
+
+def above(roi: np.ndarray, level: float) -> np.ndarray:
+    """``roi`` less ``level``, and 0 where it is below: only what stands above the level."""
+    return np.maximum(roi - np.float32(level), np.float32(0.0))

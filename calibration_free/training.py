@@ -43,7 +43,6 @@ from calibration_free.preprocess import (
     max_and_saturation_u8,
     normalise,
 )
-from calibration_free.roi import extract_roi
 from drivers.core.pose import Pose
 
 logger = logging.getLogger(__name__)
@@ -441,8 +440,8 @@ def train_bundle(nn1_data: Dataset, nn2_data: Dataset, *, object_kind: str, kapp
                                                    seed + 3, nn1_epochs, NN1_ROT_HIDDEN,
                                                    NN1_NEAR_WEIGHT_DECAY)
 
-    rois = [extract_roi(prep.normalised["nn2"][i], u, v, gabor.roi_px)
-            for i, (u, v) in zip(prep.usable["nn2"], prep.centres("nn2"), strict=True)]
+    rois = [prep.front.feature_roi(prep.normalised["nn2"][i], prep.found["nn2"][i], gabor.roi_px)
+            for i in prep.usable["nn2"]]
     nn2 = train_nn2(rois, nn2_data.labels[prep.usable["nn2"], 2], kappa, gabor, seed=seed,
                     hidden=nn2_hidden, epochs=nn2_epochs, weight_decay=nn2_weight_decay)
 

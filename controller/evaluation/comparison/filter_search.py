@@ -35,7 +35,6 @@ from calibration_free import angles, training
 from calibration_free.dataset import Dataset, random_offsets
 from calibration_free.gabor import GaborBank, GaborConfig
 from calibration_free.perception import Perception
-from calibration_free.roi import extract_roi
 from controller.devices import open_devices
 from controller.evaluation.comparison.pools import Tick, open_pool
 from controller.evaluation.metrics import is_safe, state_at
@@ -143,7 +142,7 @@ def roi_set(perception: Perception, data: Dataset, roi_px: int) -> RoiSet:
         if not loc.ok:
             missed += 1
             continue
-        rois.append(extract_roi(normalised, loc.u_px, loc.v_px, roi_px))
+        rois.append(perception.bundle.front.feature_roi(normalised, loc, roi_px))
         labels.append(label[2])
     return RoiSet(np.stack(rois), np.asarray(labels, dtype=float), missed)
 
