@@ -36,7 +36,7 @@ from calibration_free.roi import above, extract_roi
 from drivers.core.errors import ConfigError
 
 # In the saturation channel the Gabor features see only what stands above this fraction of
-# the part's threshold (``FrontEnd.feature_roi``).
+# the part's threshold (``FrontEnd.feature_floor``, set at training).
 FEATURE_FLOOR = 0.75
 
 
@@ -64,6 +64,9 @@ class FrontEnd:
             of the part's size and shape (a cluttered image), those of this colour are
             preferred. None: colour is not used (model files written before it was learned).
         chroma_tolerance: the largest chromaticity distance still taken for the part.
+        feature_floor: in the saturation channel, the features see the ROI above this
+            fraction of ``threshold`` (``feature_roi``); 0: all of it (model files written
+            before the floor).
     """
 
     frame_height_px: int
@@ -78,8 +81,13 @@ class FrontEnd:
     nominal_uv_px: tuple[float, float] | None = None
     chroma: tuple[float, float, float] | None = None
     chroma_tolerance: float = 0.0
+    feature_floor: float = 0.0
 
     def __post_init__(self) -> None:
+        if isinstance(self.feature_floor, bool) or not isinstance(
+                self.feature_floor, (int, float)) or not 0.0 <= self.feature_floor <= 1.0:
+            raise ConfigError(f"front end: feature_floor must be a number in 0..1, got "
+                              f"{self.feature_floor!r}")
         for name in ("frame_height_px", "frame_width_px"):
             size = getattr(self, name)
             if isinstance(size, bool) or not isinstance(size, int) or size < 1:
@@ -136,7 +144,7 @@ class FrontEnd:
                     size_px: int) -> np.ndarray:
         """The ROI the Gabor features are computed on: the ``size_px`` square of the
         preprocessed image centred on the part found in it (``roi.extract_roi``); in the
-        saturation channel with everything up to ``FEATURE_FLOOR`` times the part's
+        saturation channel with everything up to ``feature_floor`` times the part's
         threshold taken off (``roi.above``), the same in training and in the loop.
 
         Saturation is near zero on a grey table in good light, but camera noise in a dark
@@ -144,9 +152,9 @@ class FrontEnd:
         part shows as a patch: the features would read that as part of the part's shape.
         """
         roi = extract_roi(preprocessed, loc.u_px, loc.v_px, size_px)
-        if self.channel != "saturation":
+        if self.channel != "saturation" or not self.feature_floor:
             return roi
-        return above(roi, FEATURE_FLOOR * self.threshold)
+        return above(roi, self.feature_floor * self.threshold)
 
     def localise(self, preprocessed: np.ndarray, image: np.ndarray | None = None
                  ) -> Localisation:
@@ -199,12 +207,14 @@ class FrontEnd:
                                  "max_elongation": self.max_elongation,
                                  "channel": self.channel, "nominal_uv_px": uv,
                                  "chroma": chroma,
-                                 "chroma_tolerance": self.chroma_tolerance}}
+                                 "chroma_tolerance": self.chroma_tolerance,
+                                 "feature_floor": self.feature_floor}}
 
     @classmethod
     def from_info(cls, info: Mapping[str, Any]) -> FrontEnd:
-        """Inverse of ``to_info``. ``localisation.channel``, ``nominal_uv_px`` and ``chroma``
-        may be absent (model files written before they were stored): "max", None and None.
+        """Inverse of ``to_info``. ``localisation.channel``, ``nominal_uv_px``, ``chroma`` and
+        ``feature_floor`` may be absent (model files written before they were stored): "max",
+        None, None and 0.
 
         Args:
             info: a model file's JSON (at least ``frame_px``, ``intensity``,
@@ -223,7 +233,8 @@ class FrontEnd:
                    float(loc["area_tolerance"]), float(loc["max_elongation"]),
                    loc.get("channel", "max"), None if uv is None else tuple(uv),
                    None if chroma is None else tuple(chroma),
-                   float(loc.get("chroma_tolerance", 0.0)))
+                   float(loc.get("chroma_tolerance", 0.0)),
+                   float(loc.get("feature_floor", 0.0)))
 
 
 # The colour preference's tolerance: this many times the largest chromaticity distance seen among

@@ -10,6 +10,7 @@ import pytest
 from calibration_free.angles import decode, encode
 from calibration_free.dataset import Dataset, random_offsets
 from calibration_free.errors import ImageError, TrainingError
+from calibration_free.front_end import FEATURE_FLOOR, FrontEnd
 from calibration_free.perception import Perception
 from calibration_free.synthetic import render, render_at
 from calibration_free.training import (
@@ -61,6 +62,24 @@ def test_training_records_what_it_did(bundle):
     assert t["nn1_near"]["samples"] == 63 + 7
     assert t["nn2"]["weight_decay"] == default_nn2_weight_decay(KAPPA)
     assert 700 < bundle.front.expected_area_px < 950  # a 30 px rounded square minus its hole
+
+
+def test_the_feature_floor_is_learned_with_the_saturation_channel(bundle, saturation_bundle,
+                                                                  cell):
+    assert bundle.front.feature_floor == 0.0  # the paper's max(R, G, B) path: no floor
+    front = saturation_bundle.front
+    assert front.channel == "saturation" and front.feature_floor == FEATURE_FLOOR
+    p = Perception(saturation_bundle).perceive(render(cell, np.zeros(3),
+                                                      np.random.default_rng(4)))
+    roi = front.feature_roi(p.normalised, p.localisation, saturation_bundle.gabor.roi_px)
+    whole = dataclasses.replace(front, feature_floor=0.0).feature_roi(
+        p.normalised, p.localisation, saturation_bundle.gabor.roi_px)
+    floor = FEATURE_FLOOR * front.threshold
+    np.testing.assert_allclose(roi, np.maximum(whole - floor, 0.0), rtol=1e-6)
+    # a model file without the floor (written before it) keeps its features whole
+    info = saturation_bundle.to_info()
+    del info["localisation"]["feature_floor"]
+    assert FrontEnd.from_info(info).feature_floor == 0.0
 
 
 def test_the_near_net_gives_the_translation_only_near_the_taught_pose(bundle, cell):
