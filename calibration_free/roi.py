@@ -54,5 +54,7 @@ def extract_roi(normalised: np.ndarray, u_px: float, v_px: float, size_px: int =
 
 
 def above(roi: np.ndarray, level: float) -> np.ndarray:
-    """``roi`` less ``level``, and 0 where it is below: only what stands above the level."""
-    return np.maximum(roi - np.float32(level), np.float32(0.0))
+    """``roi`` less ``level``, and 0 where it is below: only what stands above the level.
+    In place (``roi`` is a window ``extract_roi`` has just cut); returns ``roi``."""
+    np.subtract(roi, np.float32(level), out=roi)
+    return np.maximum(roi, np.float32(0.0), out=roi)
