@@ -60,13 +60,13 @@ NN2_HIDDEN = (12,)
 # cubes 400 steps gave ~1.0 deg RMS on random test poses, 1500 steps ~1.2 deg).
 NN1_EPOCHS = 2000
 NN2_EPOCHS = 1500
-# Training images whose label is this close to zero were taken at the taught pose.
 # The near translation net needs at least this many samples in its range.
 MIN_NEAR_SAMPLES = 9
 # The near net's L2 penalty: it corrects nn1_rot where the samples say so and fades to no
 # correction between them (without it, 10 units on 70 samples wiggle between the grid's
 # three positions per axis).
 NN1_NEAR_WEIGHT_DECAY = 1e-2
+# Training images whose label is this close to zero were taken at the taught pose.
 NOMINAL_TOL_MM = 0.05
 NOMINAL_TOL_DEG = 0.05
 # L2 penalty on NN2's weights: 63 images cannot pin down 36 x 12 weights; without it NN2
@@ -409,9 +409,7 @@ def train_bundle(nn1_data: Dataset, nn2_data: Dataset, *, object_kind: str, kapp
     sets = training_sets(nn1_data, nn2_data, nn1_extra)
     prep = prepare_training(sets, polarity, localisation_channel)
     uv, labels = nn1_samples(sets, prep)
-    dxdy = np.ascontiguousarray(labels[:, :2])
-    at_nominal = (np.hypot(labels[:, 0], labels[:, 1]) < NOMINAL_TOL_MM) \
-        & (np.abs(labels[:, 2]) < NOMINAL_TOL_DEG)
+    uvsc, dxdy, at_nominal = _translation_samples(uv, labels, kappa)
     if not at_nominal.any():
         logger.warning("no training image at the taught pose: NN1's zero is not pinned")
     nominal_uv = tuple(float(v) for v in (uv[at_nominal] if at_nominal.any() else uv)
@@ -420,21 +418,15 @@ def train_bundle(nn1_data: Dataset, nn2_data: Dataset, *, object_kind: str, kapp
     # The full loop knows the rotation (NN2) before it moves: the silhouette's centre shifts a
     # little with the part's rotation in the image, which (u, v) alone cannot tell apart from
     # a translation, so the full loop's translation also sees sin/cos(kappa dphi).
-    s_rot, c_rot = angles.encode(labels[:, 2], kappa)
-    uvsc = np.column_stack([uv, s_rot, c_rot])
     nn1_rot, nn1_rot_zero_offset = _train_pinned(uvsc, dxdy, at_nominal, seed + 2, nn1_epochs,
                                                  NN1_ROT_HIDDEN)
     # Where the loop makes its full loops and settles, a correction of that net fitted to the
     # samples near the taught pose: over the whole +/-25 mm range its error near zero
     # follows the part's turn by up to 0.15 mm.
     if "nn1_extra" not in sets:  # the NN2 set is not among NN1's samples: add it here
-        n2_labels = nn2_data.labels[prep.usable["nn2"]]
-        s2, c2 = angles.encode(n2_labels[:, 2], kappa)
-        uvsc = np.concatenate([uvsc, np.column_stack([prep.centres("nn2"), s2, c2])])
-        dxdy = np.concatenate([dxdy, n2_labels[:, :2]])
-        at_nominal = np.concatenate([at_nominal, (np.hypot(n2_labels[:, 0], n2_labels[:, 1])
-                                                  < NOMINAL_TOL_MM)
-                                     & (np.abs(n2_labels[:, 2]) < NOMINAL_TOL_DEG)])
+        uvsc, dxdy, at_nominal = _translation_samples(
+            np.concatenate([uv, prep.centres("nn2")]),
+            np.concatenate([labels, nn2_data.labels[prep.usable["nn2"]]]), kappa)
     near_mm, near = near_samples(dxdy, nn2_data.labels)
     residual = dxdy[near] - nn1_rot.model(uvsc[near])
     nn1_near, nn1_near_zero_offset = _train_pinned(uvsc[near], residual, at_nominal[near],
@@ -468,6 +460,18 @@ def train_bundle(nn1_data: Dataset, nn2_data: Dataset, *, object_kind: str, kapp
                        gabor=gabor, nn1=nn1.model, nn1_rot=nn1_rot.model,
                        nn1_near=nn1_near.model, near_mm=near_mm, nn2=nn2.model,
                        training=training)
+
+
+def _translation_samples(uv: np.ndarray, labels: np.ndarray, kappa: int
+                         ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """The translation nets' samples from the part's (u, v) and the images' labels: inputs
+    (u, v, sin, cos of kappa dphi), targets (dx_mm, dy_mm), and which were taken at the
+    taught pose."""
+    s_rot, c_rot = angles.encode(labels[:, 2], kappa)
+    at_nominal = (np.hypot(labels[:, 0], labels[:, 1]) < NOMINAL_TOL_MM) \
+        & (np.abs(labels[:, 2]) < NOMINAL_TOL_DEG)
+    return (np.column_stack([uv, s_rot, c_rot]), np.ascontiguousarray(labels[:, :2]),
+            at_nominal)
 
 
 def near_samples(dxdy: np.ndarray, nn2_labels: np.ndarray) -> tuple[float, np.ndarray]:
