@@ -130,12 +130,13 @@ def measure(n_frames: int, n_opencv_frames: int, seed: int) -> dict:
     def opencv_perceive(image: np.ndarray) -> float:
         normalised, loc = perception.locate(image)
         bundle.nn1(np.array((loc.u_px, loc.v_px)))
-        s, c = bundle.nn2(filter2d.features(normalised, loc.u_px, loc.v_px))
+        s, c = bundle.nn2(filter2d.features(bundle.front.feature_frame(normalised, loc),
+                                            loc.u_px, loc.v_px))
         return angles.decode(float(s), float(c), bundle.kappa)
 
     opencv_us = _time_us(opencv_perceive, frames[:n_opencv_frames])
-    feature_diff = [np.linalg.norm(filter2d.features(perception.locate(frame)[0], p.u_px,
-                                                     p.v_px) - p.features)
+    feature_diff = [np.linalg.norm(filter2d.features(bundle.front.feature_frame(
+                        *perception.locate(frame)), p.u_px, p.v_px) - p.features)
                     / np.linalg.norm(p.features)
                     for frame, p in zip(frames[:n_opencv_frames], percepts, strict=False)]
     stages = ("preprocess", "localise", "nn1", "roi", "features", "nn2")

@@ -17,7 +17,7 @@ from typing import Any
 import numpy as np
 
 from calibration_free.errors import ImageError
-from calibration_free.kernels import saturation_image
+from calibration_free.kernels import cut_levels, saturation_image
 from calibration_free.localise import (
     AREA_TOLERANCE,
     NO_ELONGATION_LIMIT,
@@ -36,8 +36,13 @@ from calibration_free.roi import above, extract_roi
 from drivers.core.errors import ConfigError
 
 # In the saturation channel the Gabor features see only what stands above this fraction of
-# the part's threshold (``FrontEnd.feature_floor``, set at training).
+# the part's threshold (``FrontEnd.feature_floor``, set at training), and no more than up to
+# this multiple of it (``FrontEnd.feature_ceiling``): a soft silhouette of the part.
 FEATURE_FLOOR = 0.75
+FEATURE_CEILING = 1.5
+# With a ceiling, the features see the part's blob and this many pixels around it (its edge
+# ramp outside the threshold).
+FEATURE_MARGIN_PX = 2
 
 
 @dataclass(frozen=True)
@@ -67,6 +72,9 @@ class FrontEnd:
         feature_floor: in the saturation channel, the features see the ROI above this
             fraction of ``threshold`` (``feature_roi``); 0: all of it (model files written
             before the floor).
+        feature_ceiling: in the saturation channel, the features see the ROI up to this
+            multiple of ``threshold`` (everything above it reads the same); 0: no ceiling
+            (model files written before it).
     """
 
     frame_height_px: int
@@ -82,12 +90,18 @@ class FrontEnd:
     chroma: tuple[float, float, float] | None = None
     chroma_tolerance: float = 0.0
     feature_floor: float = 0.0
+    feature_ceiling: float = 0.0
 
     def __post_init__(self) -> None:
         if isinstance(self.feature_floor, bool) or not isinstance(
                 self.feature_floor, (int, float)) or not 0.0 <= self.feature_floor <= 1.0:
             raise ConfigError(f"front end: feature_floor must be a number in 0..1, got "
                               f"{self.feature_floor!r}")
+        ceiling = self.feature_ceiling
+        if isinstance(ceiling, bool) or not isinstance(ceiling, (int, float)) or not (
+                ceiling == 0.0 or self.feature_floor < ceiling < math.inf):
+            raise ConfigError(f"front end: feature_ceiling must be 0 (none) or a finite number "
+                              f"above feature_floor ({self.feature_floor!r}), got {ceiling!r}")
         for name in ("frame_height_px", "frame_width_px"):
             size = getattr(self, name)
             if isinstance(size, bool) or not isinstance(size, int) or size < 1:
@@ -145,16 +159,51 @@ class FrontEnd:
         """The ROI the Gabor features are computed on: the ``size_px`` square of the
         preprocessed image centred on the part found in it (``roi.extract_roi``); in the
         saturation channel with everything up to ``feature_floor`` times the part's
-        threshold taken off (``roi.above``), the same in training and in the loop.
+        threshold taken off and everything above ``feature_ceiling`` times it cut to that
+        level (``roi.above``), the same in training and in the loop; with a ceiling, only
+        the part's blob (``loc.part_mask``) and ``FEATURE_MARGIN_PX`` around it stay.
 
         Saturation is near zero on a grey table in good light, but camera noise in a dark
         frame and a warm lamp raise it over the whole table, and a cast shadow beside the
         part shows as a patch: the features would read that as part of the part's shape.
+        Inside the part, saturation varies with the light too: a face turned from a side
+        lamp is dark and its saturation noisy, a lit one is clipped in its brightest channel.
+        Cut at the ceiling, the inside is flat and the features read the outline, whose
+        ramp between floor and ceiling keeps its sub-pixel position; the noise specks in a
+        dark cast shadow that reach over the floor would then weigh as much as the part's
+        edge, so they are taken off with everything else away from the part.
         """
         roi = extract_roi(preprocessed, loc.u_px, loc.v_px, size_px)
-        if self.channel != "saturation" or not self.feature_floor:
+        if self.channel != "saturation" or not (self.feature_floor or self.feature_ceiling):
             return roi
-        return above(roi, self.feature_floor * self.threshold)
+        if not self.feature_ceiling:
+            return above(roi, self.feature_floor * self.threshold)
+        low, high = self.feature_floor * self.threshold, self.feature_ceiling * self.threshold
+        if loc.part_mask is None:
+            return above(roi, low, high)
+        # ROI pixel (i, j) samples the frame at (u - (size - 1) / 2 + j, v - ...): the nearest
+        # frame pixel is (x0 + j, y0 + i)
+        cut_levels(roi, np.float32(low), np.float32(high), loc.part_mask,
+                   math.floor(loc.u_px - (size_px - 1) / 2.0 + 0.5),
+                   math.floor(loc.v_px - (size_px - 1) / 2.0 + 0.5), FEATURE_MARGIN_PX)
+        return roi
+
+    def feature_frame(self, preprocessed: np.ndarray, loc: Localisation) -> np.ndarray:
+        """The whole preprocessed frame cut as ``feature_roi`` cuts its window (a copy): what a
+        full-frame filter must see to give the same features (``bench perception``'s
+        reference path)."""
+        frame = preprocessed.copy()
+        if self.channel != "saturation" or not (self.feature_floor or self.feature_ceiling):
+            return frame
+        low = self.feature_floor * self.threshold
+        if not self.feature_ceiling:
+            return above(frame, low)
+        high = self.feature_ceiling * self.threshold
+        if loc.part_mask is None:
+            return above(frame, low, high)
+        cut_levels(frame, np.float32(low), np.float32(high), loc.part_mask, 0, 0,
+                   FEATURE_MARGIN_PX)
+        return frame
 
     def localise(self, preprocessed: np.ndarray, image: np.ndarray | None = None
                  ) -> Localisation:
@@ -208,13 +257,14 @@ class FrontEnd:
                                  "channel": self.channel, "nominal_uv_px": uv,
                                  "chroma": chroma,
                                  "chroma_tolerance": self.chroma_tolerance,
-                                 "feature_floor": self.feature_floor}}
+                                 "feature_floor": self.feature_floor,
+                                 "feature_ceiling": self.feature_ceiling}}
 
     @classmethod
     def from_info(cls, info: Mapping[str, Any]) -> FrontEnd:
-        """Inverse of ``to_info``. ``localisation.channel``, ``nominal_uv_px``, ``chroma`` and
-        ``feature_floor`` may be absent (model files written before they were stored): "max",
-        None, None and 0.
+        """Inverse of ``to_info``. ``localisation.channel``, ``nominal_uv_px``, ``chroma``,
+        ``feature_floor`` and ``feature_ceiling`` may be absent (model files written before
+        they were stored): "max", None, None, 0 and 0.
 
         Args:
             info: a model file's JSON (at least ``frame_px``, ``intensity``,
@@ -234,7 +284,8 @@ class FrontEnd:
                    loc.get("channel", "max"), None if uv is None else tuple(uv),
                    None if chroma is None else tuple(chroma),
                    float(loc.get("chroma_tolerance", 0.0)),
-                   float(loc.get("feature_floor", 0.0)))
+                   float(loc.get("feature_floor", 0.0)),
+                   float(loc.get("feature_ceiling", 0.0)))
 
 
 # The colour preference's tolerance: this many times the largest chromaticity distance seen among

@@ -130,3 +130,34 @@ def coverage_moments(window: np.ndarray, core: np.ndarray, band: np.ndarray,
             m10 += w * j
             m01 += w * i
     return m00, m10, m01
+
+
+
+@njit("void(float32[:, ::1], float32, float32, uint8[:, ::1], int64, int64, int64)",
+      cache=True, nogil=True, error_model="numpy")
+def cut_levels(roi: np.ndarray, low: np.float32, high: np.float32, part_mask: np.ndarray,
+               x0: int, y0: int, margin: int) -> None:  # pragma: no cover
+    """In place: ``roi`` less ``low``, within 0..``high - low``, and 0 where no pixel of
+    ``part_mask`` (nonzero: the part) lies within ``margin`` pixels (the square around it) of
+    the frame pixel under the ROI pixel: ROI pixel (i, j) lies on frame pixel (y0 + i, x0 + j);
+    beyond the frame there is no part."""
+    height, width = roi.shape
+    frame_h, frame_w = part_mask.shape
+    top = high - low
+    for i in range(height):
+        for j in range(width):
+            value = roi[i, j] - low
+            if value <= 0.0:
+                roi[i, j] = 0.0
+                continue
+            y, x = y0 + i, x0 + j
+            near = 0 <= y < frame_h and 0 <= x < frame_w and part_mask[y, x] != 0
+            if not near:
+                for yy in range(max(y - margin, 0), min(y + margin + 1, frame_h)):
+                    for xx in range(max(x - margin, 0), min(x + margin + 1, frame_w)):
+                        if part_mask[yy, xx] != 0:
+                            near = True
+                            break
+                    if near:
+                        break
+            roi[i, j] = min(value, top) if near else 0.0

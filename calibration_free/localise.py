@@ -20,7 +20,7 @@ from __future__ import annotations
 import dataclasses
 import math
 from collections.abc import Callable
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from typing import Literal
 
 import cv2
@@ -66,6 +66,8 @@ class Localisation:
         area_px: area of the object's blob in pixels; None unless status is "ok".
         reason: human-readable explanation ("" when ok via the histogram path).
         method: which path decided: "histogram" or "components".
+        part_mask: a uint8 image of the frame's size, 255 on the part's blob and 0 elsewhere
+            (what the features may look at: ``FrontEnd.feature_roi``); None unless ok.
     """
 
     status: Status
@@ -74,6 +76,7 @@ class Localisation:
     area_px: float | None
     reason: str
     method: Method
+    part_mask: np.ndarray | None = field(default=None, repr=False, compare=False)
 
     @property
     def ok(self) -> bool:
@@ -243,13 +246,14 @@ def localise(normalised: np.ndarray, threshold: float, expected_area_px: float |
                 or _elongation(s_uu / area - u * u, s_vv / area - v * v,
                                s_uv / area - u * v) <= max_elongation):
             u, v = subpixel_centre(normalised, polarity, u, v, area, mask, 255)
-            return Localisation("ok", u, v, area, "", "histogram")
+            return Localisation("ok", u, v, area, "", "histogram", mask)
     loc, labels, label = _by_components(mask, expected_area_px, area_tolerance, min_blob_px,
                                         max_elongation, expected_uv, blob_check)
     if loc.status != "ok":
         return loc
     u, v = subpixel_centre(normalised, polarity, loc.u_px, loc.v_px, loc.area_px, labels, label)
-    return dataclasses.replace(loc, u_px=u, v_px=v)
+    return dataclasses.replace(loc, u_px=u, v_px=v,
+                               part_mask=cv2.compare(labels, label, cv2.CMP_EQ))
 
 
 def elongation(mask: np.ndarray) -> float:

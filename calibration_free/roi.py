@@ -53,8 +53,11 @@ def extract_roi(normalised: np.ndarray, u_px: float, v_px: float, size_px: int =
     return cv2.getRectSubPix(normalised, (size_px, size_px), (float(u_px), float(v_px)))
 
 
-def above(roi: np.ndarray, level: float) -> np.ndarray:
-    """``roi`` less ``level``, and 0 where it is below: only what stands above the level.
+def above(roi: np.ndarray, level: float, top: float | None = None) -> np.ndarray:
+    """``roi`` less ``level``, and 0 where it is below: only what stands above the level;
+    with ``top``, at most ``top - level`` (everything from ``top`` up reads the same).
     In place (``roi`` is a window ``extract_roi`` has just cut); returns ``roi``."""
     np.subtract(roi, np.float32(level), out=roi)
-    return np.maximum(roi, np.float32(0.0), out=roi)
+    if top is None:
+        return np.maximum(roi, np.float32(0.0), out=roi)
+    return np.clip(roi, np.float32(0.0), np.float32(top - level), out=roi)

@@ -25,7 +25,7 @@ from calibration_free import angles
 from calibration_free.bundle import ModelBundle
 from calibration_free.dataset import Dataset
 from calibration_free.errors import TrainingError
-from calibration_free.front_end import FEATURE_FLOOR, FrontEnd, learn_chroma
+from calibration_free.front_end import FEATURE_CEILING, FEATURE_FLOOR, FrontEnd, learn_chroma
 from calibration_free.gabor import GaborBank, GaborConfig
 from calibration_free.localise import (
     Localisation,
@@ -230,7 +230,8 @@ def prepare_training(sets: dict[str, Dataset], polarity: Polarity = "bright",
     chroma, chroma_tolerance = colour if colour is not None else (None, 0.0)
     front = FrontEnd(height, width, intensity, threshold, polarity, expected_area, tolerance,
                      max_elongation, channel, chroma=chroma, chroma_tolerance=chroma_tolerance,
-                     feature_floor=FEATURE_FLOOR if channel == "saturation" else 0.0)
+                     feature_floor=FEATURE_FLOOR if channel == "saturation" else 0.0,
+                     feature_ceiling=FEATURE_CEILING if channel == "saturation" else 0.0)
     return PreparedSets(front, located, found, usable, time.perf_counter() - start)
 
 

@@ -130,7 +130,8 @@ def test_a_file_in_the_version_4_layout_loads_and_is_still_written(bundle, cell,
     assert written["localisation"] == {**expected["localisation"],
                                        "chroma": list(bundle.front.chroma),
                                        "chroma_tolerance": bundle.front.chroma_tolerance,
-                                       "feature_floor": bundle.front.feature_floor}
+                                       "feature_floor": bundle.front.feature_floor,
+                                       "feature_ceiling": bundle.front.feature_ceiling}
     assert written["frame_px"] == expected["frame_px"]
     assert written["intensity"] == expected["intensity"]
 

@@ -6,7 +6,7 @@ import cv2
 import numpy as np
 import pytest
 
-from calibration_free.kernels import coverage_moments, object_mask, saturation_image
+from calibration_free.kernels import coverage_moments, cut_levels, object_mask, saturation_image
 from calibration_free.localise import binarise, elongation
 from calibration_free.preprocess import max_and_saturation_u8
 
@@ -94,3 +94,19 @@ def test_coverage_moments_match_the_numpy_formula(bright):
     assert coverage_moments(window, core, band, ring, not bright) == (0.0, 0.0, 0.0)
     empty = np.zeros_like(core)
     assert coverage_moments(window, empty, band, ring, bright) == (0.0, 0.0, 0.0)
+
+
+@pytest.mark.parametrize(("x0", "y0"), [(40, 30), (-7, -5), (150, 110)])
+def test_cut_levels_keeps_what_stands_between_the_levels_near_the_part(x0, y0):
+    rng = np.random.default_rng(9)
+    part = np.zeros((144, 192), np.uint8)
+    cv2.circle(part, (x0 + 25, y0 + 25), 12, 255, -1)
+    cv2.circle(part, (5, 140), 6, 255, -1)  # a second blob, in some windows only
+    roi = rng.uniform(0.0, 250.0, (50, 50)).astype(np.float32)
+    # the reference: the part (none beyond the frame) grown by 2 px (5x5 square), the window
+    # under the ROI
+    grown = cv2.dilate(np.pad(part, 60), np.ones((5, 5), np.uint8))
+    keep = grown[y0 + 60:y0 + 110, x0 + 60:x0 + 110]
+    expected = np.where(keep > 0, np.clip(roi - 80.0, 0.0, 100.0), 0.0)
+    cut_levels(roi, np.float32(80.0), np.float32(180.0), part, x0, y0, 2)
+    np.testing.assert_array_equal(roi, expected.astype(np.float32))

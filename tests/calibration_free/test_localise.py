@@ -61,6 +61,9 @@ def test_histogram_and_components_agree(cell):
     assert slow.ok and slow.area_px == fast.area_px
     assert slow.u_px == pytest.approx(fast.u_px, abs=1e-9)
     assert slow.v_px == pytest.approx(fast.v_px, abs=1e-9)
+    # both keep the part's blob, and only it: the speck is not the part
+    np.testing.assert_array_equal(fast.part_mask > 0, binarise(n, thr) > 0)
+    np.testing.assert_array_equal(slow.part_mask, fast.part_mask)
 
 
 def test_empty_image_is_no_object(cell):
@@ -97,6 +100,9 @@ def test_picks_the_object_in_clutter(cell):
     loc = localise(normalised(cluttered), thr, area)
     assert loc.status == "ok" and loc.method == "components"
     assert abs(loc.u_px - 101.37) < 0.2 and abs(loc.v_px - 66.81) < 0.2
+    assert cv2.countNonZero(loc.part_mask) == loc.area_px  # the part's blob alone
+    m = cv2.moments(loc.part_mask, True)
+    assert abs(m["m10"] / m["m00"] - 101.37) < 0.5 and abs(m["m01"] / m["m00"] - 66.81) < 0.5
     # the only blob is the wrong size: no object, never a guess
     patch_only = add_disc(np.full_like(image, cell.table_rgb), 160.0, 110.0, 24.0)
     assert localise(normalised(patch_only), thr, area).status == "no_object"

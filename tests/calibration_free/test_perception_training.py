@@ -10,7 +10,7 @@ import pytest
 from calibration_free.angles import decode, encode
 from calibration_free.dataset import Dataset, random_offsets
 from calibration_free.errors import ImageError, TrainingError
-from calibration_free.front_end import FEATURE_FLOOR, FrontEnd
+from calibration_free.front_end import FEATURE_CEILING, FEATURE_FLOOR, FrontEnd
 from calibration_free.perception import Perception
 from calibration_free.synthetic import render, render_at
 from calibration_free.training import (
@@ -19,6 +19,7 @@ from calibration_free.training import (
     near_samples,
     train_bundle,
 )
+from drivers.core.errors import ConfigError
 
 from .conftest import KAPPA, NOMINAL_POSE
 
@@ -64,22 +65,53 @@ def test_training_records_what_it_did(bundle):
     assert 700 < bundle.front.expected_area_px < 950  # a 30 px rounded square minus its hole
 
 
-def test_the_feature_floor_is_learned_with_the_saturation_channel(bundle, saturation_bundle,
-                                                                  cell):
-    assert bundle.front.feature_floor == 0.0  # the paper's max(R, G, B) path: no floor
+def test_the_feature_floor_and_ceiling_are_learned_with_the_saturation_channel(
+        bundle, saturation_bundle, cell):
+    # the paper's max(R, G, B) path: no floor, no ceiling
+    assert bundle.front.feature_floor == bundle.front.feature_ceiling == 0.0
     front = saturation_bundle.front
     assert front.channel == "saturation" and front.feature_floor == FEATURE_FLOOR
+    assert front.feature_ceiling == FEATURE_CEILING
     p = Perception(saturation_bundle).perceive(render(cell, np.zeros(3),
                                                       np.random.default_rng(4)))
-    roi = front.feature_roi(p.normalised, p.localisation, saturation_bundle.gabor.roi_px)
-    whole = dataclasses.replace(front, feature_floor=0.0).feature_roi(
-        p.normalised, p.localisation, saturation_bundle.gabor.roi_px)
-    floor = FEATURE_FLOOR * front.threshold
-    np.testing.assert_allclose(roi, np.maximum(whole - floor, 0.0), rtol=1e-6)
-    # a model file without the floor (written before it) keeps its features whole
+    size = saturation_bundle.gabor.roi_px
+    roi = front.feature_roi(p.normalised, p.localisation, size)
+    whole = dataclasses.replace(front, feature_floor=0.0, feature_ceiling=0.0).feature_roi(
+        p.normalised, p.localisation, size)
+    floor, ceiling = FEATURE_FLOOR * front.threshold, FEATURE_CEILING * front.threshold
+    assert whole.max() > ceiling  # the part's inside is cut to the ceiling
+    np.testing.assert_allclose(roi, np.clip(whole - floor, 0.0, ceiling - floor), rtol=1e-6)
+    # a speck over the floor away from the part (noise in a dark cast shadow) is not seen,
+    # one at the part's edge is
+    u, v = int(p.u_px), int(p.v_px)
+    specked = p.normalised.copy()
+    specked[v - 22:v - 20, u - 22:u - 20] = 1.2 * front.threshold
+    assert not p.localisation.part_mask[v - 24:v - 18, u - 24:u - 18].any()
+    np.testing.assert_array_equal(front.feature_roi(specked, p.localisation, size), roi)
+    assert dataclasses.replace(front, feature_ceiling=0.0).feature_roi(
+        specked, p.localisation, size).max() > 0.4 * front.threshold
+    # the whole frame cut the same way (the full-frame reference of bench perception): its
+    # window on pixel centres is the cut window
+    frame = front.feature_frame(specked, p.localisation)
+    at = dataclasses.replace(p.localisation, u_px=u + 0.5, v_px=v + 0.5)
+    np.testing.assert_array_equal(front.feature_roi(specked, at, size),
+                                  frame[v - 24:v + 26, u - 24:u + 26])
+    # a model file without the floor or the ceiling (written before them) keeps its features
+    # whole, or cut at the floor only
     info = saturation_bundle.to_info()
+    del info["localisation"]["feature_ceiling"]
+    assert FrontEnd.from_info(info).feature_ceiling == 0.0
+    floor_only = dataclasses.replace(front, feature_ceiling=0.0).feature_roi(
+        p.normalised, p.localisation, saturation_bundle.gabor.roi_px)
+    np.testing.assert_allclose(floor_only, np.maximum(whole - floor, 0.0), rtol=1e-6)
     del info["localisation"]["feature_floor"]
     assert FrontEnd.from_info(info).feature_floor == 0.0
+
+
+@pytest.mark.parametrize("ceiling", [0.5, 0.75, -1.0, float("inf"), float("nan"), True, "1.5"])
+def test_a_ceiling_not_above_the_floor_is_refused(saturation_bundle, ceiling):
+    with pytest.raises(ConfigError, match="feature_ceiling"):
+        dataclasses.replace(saturation_bundle.front, feature_ceiling=ceiling)
 
 
 def test_the_near_net_gives_the_translation_only_near_the_taught_pose(bundle, cell):

@@ -8,7 +8,7 @@ import pytest
 
 from calibration_free.errors import ImageError
 from calibration_free.gabor import GaborBank
-from calibration_free.roi import extract_roi
+from calibration_free.roi import above, extract_roi
 
 
 def image() -> np.ndarray:
@@ -68,3 +68,12 @@ def test_centre_outside_the_image_is_refused(u, v):
 def test_wrong_image_type_is_refused():
     with pytest.raises(ImageError, match="float32"):
         extract_roi(np.zeros((144, 192), np.uint8), 10.0, 10.0)
+
+
+def test_above_takes_off_the_level_and_cuts_at_the_top_in_place():
+    roi = np.array([[10.0, 50.0], [100.0, 200.0]], np.float32)
+    assert above(roi, 40.0) is roi
+    np.testing.assert_array_equal(roi, [[0.0, 10.0], [60.0, 160.0]])
+    roi = np.array([[10.0, 50.0], [100.0, 200.0]], np.float32)
+    assert above(roi, 40.0, 150.0) is roi
+    np.testing.assert_array_equal(roi, [[0.0, 10.0], [60.0, 110.0]])
