@@ -174,36 +174,31 @@ class FrontEnd:
         edge, so they are taken off with everything else away from the part.
         """
         roi = extract_roi(preprocessed, loc.u_px, loc.v_px, size_px)
-        if self.channel != "saturation" or not (self.feature_floor or self.feature_ceiling):
-            return roi
-        if not self.feature_ceiling:
-            return above(roi, self.feature_floor * self.threshold)
-        low, high = self.feature_floor * self.threshold, self.feature_ceiling * self.threshold
-        if loc.part_mask is None:
-            return above(roi, low, high)
         # ROI pixel (i, j) samples the frame at (u - (size - 1) / 2 + j, v - ...): the nearest
         # frame pixel is (x0 + j, y0 + i)
-        cut_levels(roi, np.float32(low), np.float32(high), loc.part_mask,
-                   math.floor(loc.u_px - (size_px - 1) / 2.0 + 0.5),
-                   math.floor(loc.v_px - (size_px - 1) / 2.0 + 0.5), FEATURE_MARGIN_PX)
-        return roi
+        return self._cut(roi, loc, math.floor(loc.u_px - (size_px - 1) / 2.0 + 0.5),
+                         math.floor(loc.v_px - (size_px - 1) / 2.0 + 0.5))
 
     def feature_frame(self, preprocessed: np.ndarray, loc: Localisation) -> np.ndarray:
         """The whole preprocessed frame cut as ``feature_roi`` cuts its window (a copy): what a
         full-frame filter must see to give the same features (``bench perception``'s
         reference path)."""
-        frame = preprocessed.copy()
+        return self._cut(preprocessed.copy(), loc, 0, 0)
+
+    def _cut(self, image: np.ndarray, loc: Localisation, x0: int, y0: int) -> np.ndarray:
+        """``image`` (a window whose pixel (i, j) lies on frame pixel (y0 + i, x0 + j)) cut to
+        what the features see, in place (see ``feature_roi``)."""
         if self.channel != "saturation" or not (self.feature_floor or self.feature_ceiling):
-            return frame
+            return image
         low = self.feature_floor * self.threshold
         if not self.feature_ceiling:
-            return above(frame, low)
+            return above(image, low)
         high = self.feature_ceiling * self.threshold
         if loc.part_mask is None:
-            return above(frame, low, high)
-        cut_levels(frame, np.float32(low), np.float32(high), loc.part_mask, 0, 0,
+            return above(image, low, high)
+        cut_levels(image, np.float32(low), np.float32(high), loc.part_mask, x0, y0,
                    FEATURE_MARGIN_PX)
-        return frame
+        return image
 
     def localise(self, preprocessed: np.ndarray, image: np.ndarray | None = None
                  ) -> Localisation:

@@ -132,7 +132,6 @@ def coverage_moments(window: np.ndarray, core: np.ndarray, band: np.ndarray,
     return m00, m10, m01
 
 
-
 @njit("void(float32[:, ::1], float32, float32, uint8[:, ::1], int64, int64, int64)",
       cache=True, nogil=True, error_model="numpy")
 def cut_levels(roi: np.ndarray, low: np.float32, high: np.float32, part_mask: np.ndarray,
