@@ -150,7 +150,7 @@ def _check_polarity(polarity: Polarity) -> bool:
 
 
 def subpixel_centre(normalised: np.ndarray, polarity: Polarity, u_px: float, v_px: float,
-                    area_px: float, parts: np.ndarray, part: int) -> tuple[float, float]:
+                    area_px: float, part_mask: np.ndarray) -> tuple[float, float]:
     """The blob's centre with its outline weighted by how much of each edge pixel it covers.
 
     The binary mask's centroid moves only when an edge crosses a pixel's centre, in whole
@@ -161,9 +161,8 @@ def subpixel_centre(normalised: np.ndarray, polarity: Polarity, u_px: float, v_p
     (the ring three pixels out, clear of the lens blur) to the part's (the blob's inside):
     the part's coverage of the pixel on a sensor that integrates over the pixel's area.
 
-    ``parts`` is a full-frame image in which the part's pixels hold ``part``: the uint8 mask
-    and 255 when it holds the part alone, the connected components' labels and the part's
-    label otherwise (``localise`` has computed either).
+    ``part_mask`` is the full-frame uint8 image that is 255 on the part's blob and 0
+    elsewhere (``Localisation.part_mask``).
     Returns the binary centre unchanged when the window holds no blob or no contrast.
     """
     height, width = normalised.shape
@@ -172,9 +171,7 @@ def subpixel_centre(normalised: np.ndarray, polarity: Polarity, u_px: float, v_p
     x0, x1 = max(cu - half, 0), min(cu + half + 1, width)
     y0, y1 = max(cv_ - half, 0), min(cv_ + half + 1, height)
     window = normalised[y0:y1, x0:x1]
-    blob = parts[y0:y1, x0:x1]
-    if blob.dtype != np.uint8 or part != 255:
-        blob = cv2.compare(blob, part, cv2.CMP_EQ)
+    blob = part_mask[y0:y1, x0:x1]
     band = cv2.dilate(blob, _KERNEL_5)
     m00, m10, m01 = coverage_moments(window, cv2.erode(blob, _KERNEL_3), band,
                                      cv2.subtract(cv2.dilate(blob, _KERNEL_7), band),
@@ -245,15 +242,15 @@ def localise(normalised: np.ndarray, threshold: float, expected_area_px: float |
                 max_elongation == NO_ELONGATION_LIMIT
                 or _elongation(s_uu / area - u * u, s_vv / area - v * v,
                                s_uv / area - u * v) <= max_elongation):
-            u, v = subpixel_centre(normalised, polarity, u, v, area, mask, 255)
+            u, v = subpixel_centre(normalised, polarity, u, v, area, mask)
             return Localisation("ok", u, v, area, "", "histogram", mask)
     loc, labels, label = _by_components(mask, expected_area_px, area_tolerance, min_blob_px,
                                         max_elongation, expected_uv, blob_check)
     if loc.status != "ok":
         return loc
-    u, v = subpixel_centre(normalised, polarity, loc.u_px, loc.v_px, loc.area_px, labels, label)
-    return dataclasses.replace(loc, u_px=u, v_px=v,
-                               part_mask=cv2.compare(labels, label, cv2.CMP_EQ))
+    part_mask = cv2.compare(labels, label, cv2.CMP_EQ)
+    u, v = subpixel_centre(normalised, polarity, loc.u_px, loc.v_px, loc.area_px, part_mask)
+    return dataclasses.replace(loc, u_px=u, v_px=v, part_mask=part_mask)
 
 
 def elongation(mask: np.ndarray) -> float:
