@@ -15,6 +15,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any, Literal
 
+from calibration_free.baselines.align.model import AlignConfig
 from calibration_free.baselines.hough.model import HoughConfig
 from calibration_free.baselines.pca.model import PcaConfig
 from calibration_free.gabor import GaborConfig
@@ -110,7 +111,8 @@ class PerceptionConfig:
     localisation_channel: the image the part is localised in (``max``: normalised max(R,G,B),
     the paper's; ``saturation``: unchanged by light and shadow for a coloured part; ``auto``:
     whichever separates part and table better in the training images); pca / hough: the
-    baseline systems' settings (``finepos evaluate --system pca|hough``); seed: training seed;
+    baseline systems' settings (``finepos evaluate --system pca|hough``); align: the
+    image-alignment servo's (``--system align``); seed: training seed;
     nn1_uses_nn2_set: also train NN1 on the NN2 grid's images (they cost no extra motion and
     make NN1 precise near the nominal pose, where the loop's fixed point is).
     """
@@ -121,6 +123,7 @@ class PerceptionConfig:
     localisation_channel: Literal["max", "saturation", "auto"] = "auto"
     pca: PcaConfig = PcaConfig()
     hough: HoughConfig = HoughConfig()
+    align: AlignConfig = AlignConfig()
     seed: int = 0
     nn1_uses_nn2_set: bool = True
 

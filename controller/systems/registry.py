@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+from controller.systems.align import AlignSystem
 from controller.systems.base import VisionSystem
 from controller.systems.gabor import GaborSystem
 from controller.systems.hough import HoughSystem
@@ -11,4 +12,5 @@ SYSTEMS: dict[str, type[VisionSystem]] = {
     "gabor": GaborSystem,
     "pca": PcaSystem,
     "hough": HoughSystem,
+    "align": AlignSystem,
 }

@@ -1,11 +1,13 @@
 """Shared fixtures of the baseline tests: the synthetic cube scene, its training grids, a test
-set, and both baseline systems trained once per session."""
+set, and the baseline systems trained once per session."""
 
 from __future__ import annotations
 
 import numpy as np
 import pytest
 
+from calibration_free.baselines.align.model import AlignModel
+from calibration_free.baselines.align.train import train_align
 from calibration_free.baselines.hough.model import HoughModel
 from calibration_free.baselines.hough.train import train_hough
 from calibration_free.baselines.pca.model import PcaModel
@@ -33,3 +35,9 @@ def pca_model(grids) -> PcaModel:
 def hough_model(grids) -> HoughModel:
     nn1, nn2 = grids
     return train_hough(nn1, nn2, object_kind="cube", kappa=KAPPA, nominal_pose=NOMINAL_POSE)
+
+
+@pytest.fixture(scope="session")
+def align_model(grids) -> AlignModel:
+    nn1, nn2 = grids
+    return train_align(nn1, nn2, object_kind="cube", kappa=KAPPA, nominal_pose=NOMINAL_POSE)

@@ -54,7 +54,7 @@ def test_a_valid_request_gets_its_defaults():
     ('{"cmd": "position", "args": {"offset": [0, 0, 181]}}', "bad_request",
      "offset[2]: must be within [-180, 180], got 181"),
     ('{"cmd": "train", "args": {"system": "svm"}}', "bad_request",
-     "system: one of gabor, pca, hough, got 'svm'"),
+     "system: one of gabor, pca, hough, align, got 'svm'"),
     ('{"cmd": "position", "args": {"part": "bolt"}}', "bad_request",
      "part: one of cube, nut, ledge, screw, got 'bolt'"),
 ])

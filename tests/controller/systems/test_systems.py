@@ -1,4 +1,5 @@
-"""The PCA and Hough systems through the registry, as the controller runs them."""
+"""The PCA, Hough and image-alignment systems through the registry, as the controller runs
+them."""
 
 from __future__ import annotations
 
@@ -20,7 +21,7 @@ STATE = CellState(nominal_pose=Pose(**NOMINAL_POSE), object_kind="cube", kappa=K
                   grasp_depth_mm=50.0, object_width_mm=30.0, source="auto", taught_at=0.0)
 
 
-@pytest.fixture(scope="module", params=["pca", "hough"])
+@pytest.fixture(scope="module", params=["pca", "hough", "align"])
 def trained(request, grids):
     system = SYSTEMS[request.param]
     return system, system.train(*grids, STATE, PerceptionConfig())
@@ -30,7 +31,7 @@ def test_registered_with_the_protocol(trained):
     system, model = trained
     assert system.name == model.system and system.suffix.startswith(".")
     assert model.train_images == 126 and model.train_seconds > 0
-    assert model.feature_count == {"pca": 3, "hough": 4}[system.name]
+    assert model.feature_count == {"pca": 3, "hough": 4, "align": 3}[system.name]
 
 
 def test_estimator_recovers_a_known_step(trained, cell):
