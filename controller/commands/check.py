@@ -16,11 +16,15 @@ from __future__ import annotations
 import argparse
 import dataclasses
 
-from controller.commands.common import add_config_option, config_from_args, positive_float
+from controller.commands.common import (
+    add_config_option,
+    add_system_option,
+    config_from_args,
+    positive_float,
+)
 from controller.config import cell_part
 from controller.devices import open_devices
 from controller.fine_positioner import FinePositioner
-from controller.systems.registry import SYSTEMS
 from controller.teach.self_check import (
     MAX_CORRECTION_DEG,
     MAX_CORRECTION_MM,
@@ -81,7 +85,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--part", metavar="NAME", choices=sorted(parts.PARTS),
                         help="the part the cell should be set up for (default: controller.part, or "
                              "the simulated table's); taught on another part fires the check")
-    parser.add_argument("--system", default="gabor", choices=sorted(SYSTEMS))
+    add_system_option(parser)
     parser.add_argument("--max-mm", type=positive_float, default=MAX_CORRECTION_MM,
                         help="largest correction (mm) the model may read at the taught pose")
     parser.add_argument("--max-deg", type=positive_float, default=MAX_CORRECTION_DEG,

@@ -11,6 +11,7 @@ from pathlib import Path
 from controller.config import cell_part, load_config, with_part
 from controller.loop.iteration_log import IterationLog
 from controller.recording.writer import RunRecorder
+from controller.systems.registry import SYSTEMS
 from controller.teach.state_folder import StateFolder
 from drivers.core import parts
 from drivers.core.errors import ConfigError
@@ -89,6 +90,15 @@ def add_part_option(parser: argparse.ArgumentParser, default_help: str) -> None:
     parser.add_argument("--part", metavar="NAME", type=part_name,
                         help=f"the part: {' | '.join(parts.PARTS)} (default: {default_help}); "
                              "on the simulated cell it is put on the table")
+
+
+def add_system_option(parser: argparse.ArgumentParser) -> None:
+    """``--system NAME``: the vision system (``controller.systems.registry``), gabor by
+    default."""
+    parser.add_argument("--system", default="gabor", choices=sorted(SYSTEMS),
+                        help="the vision system: gabor (finepos' own, the default), pca or "
+                             "hough (the paper's baselines), align (an image-alignment servo, "
+                             "for comparison)")
 
 
 TAUGHT_PART_HELP = "the one part taught, else the cell's: controller.part or the simulated table's"

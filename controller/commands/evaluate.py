@@ -41,6 +41,7 @@ from pathlib import Path
 from controller.commands.common import (
     ALL_PARTS,
     add_config_option,
+    add_system_option,
     add_timing_option,
     part_name_or_all,
     positive_int,
@@ -51,7 +52,6 @@ from controller.evaluation.mounts import evaluate_mounts
 from controller.evaluation.parts_table import parts_markdown, run_parts_table
 from controller.evaluation.trials import evaluate
 from controller.loop.iteration_log import IterationLog
-from controller.systems.registry import SYSTEMS
 from drivers.core import parts
 from drivers.core.errors import ConfigError
 from drivers.core.files import atomic_write_text, write_json
@@ -119,7 +119,7 @@ def _evaluate_mounts(args, config) -> int:
 def add_arguments(parser: argparse.ArgumentParser) -> None:
     """The options of ``finepos evaluate``."""
     add_config_option(parser)
-    parser.add_argument("--system", default="gabor", choices=sorted(SYSTEMS))
+    add_system_option(parser)
     parser.add_argument("--part", metavar="NAME", type=part_name_or_all,
                         help=f"the part: {' | '.join(parts.PARTS)} (default: the scene's), or "
                              f"{ALL_PARTS}: the parts table (see above)")

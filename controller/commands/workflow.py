@@ -13,6 +13,7 @@ from controller.commands.common import (
     add_log_option,
     add_part_option,
     add_record_option,
+    add_system_option,
     config_from_args,
     iteration_log,
     loop_budget,
@@ -23,7 +24,6 @@ from controller.commands.common import (
 from controller.commands.device_options import add_device_options, apply_device_options
 from controller.devices import open_devices
 from controller.fine_positioner import DATASETS, FinePositioner
-from controller.systems.registry import SYSTEMS
 from controller.teach.spacenav import DEFAULT_SIM_START_OFFSET, TeachAborted, teach_with_spacenav
 from drivers.core.errors import ConfigError
 from drivers.core.files import write_json
@@ -200,7 +200,7 @@ def register(subparsers) -> None:
                     "datasets into the part's state folder (state/<part>/model-<system>...).")
     add_config_option(p)
     add_part_option(p, TAUGHT_PART_HELP)
-    p.add_argument("--system", default="gabor", choices=sorted(SYSTEMS))
+    add_system_option(p)
     p.set_defaults(func=cmd_train)
 
     p = add_command(
@@ -218,7 +218,7 @@ def register(subparsers) -> None:
     add_log_option(p)
     add_record_option(p)
     add_part_option(p, TAUGHT_PART_HELP)
-    p.add_argument("--system", default="gabor", choices=sorted(SYSTEMS))
+    add_system_option(p)
     p.add_argument("--model", metavar="FILE", help="model file (default: the state folder's)")
     p.add_argument("--offset", metavar="DX,DY,DPHI",
                    help="first move to the taught pose displaced by this (mm, mm, deg)")
