@@ -1,4 +1,5 @@
-"""The paper's Table 1: gabor, pca and hough in good and poor light.
+"""The paper's Table 1: gabor, pca and hough, and the image-alignment servo (align), in good
+and poor light.
 
 Acquire the NN1 and NN2 grids once on the default scene in good light, train every system on
 them, then position (and grasp) the same random placements with each system in good and in poor

@@ -205,11 +205,17 @@ def why(result: Table1Result) -> list[str]:
     if ties:
         lines.append("- Where Gabor is not clearly better (see the verdict): in good light every "
                      "system ends near the simulated cell's floor (arm repeatability 0.02 mm / "
-                     "0.02 deg, camera noise), and all share the preprocessing and the "
-                     "translation path from the object centre (PCA uses the Gabor system's "
-                     "NN1; Hough's PSOM maps the same centres), so what remains to compare is "
-                     "the rotation, which all three resolve to a few tenths of a degree when "
-                     "the image is clean.")
+                     "0.02 deg, camera noise); PCA and Hough share the Gabor system's "
+                     "translation path from the object centre (PCA uses its NN1, Hough's PSOM "
+                     "maps the same centres), so what remains to compare is the rotation, "
+                     "which they resolve to a few tenths of a degree when the image is clean.")
+    if any(r["system"] == "align" for r in result.reports):
+        lines.append("- The image-alignment servo (align) localises in the Gabor system's "
+                     "channel and registers the part's whole soft silhouette to the taught "
+                     "one (a rotation scan, then ECC with an affine warp) and maps the shift "
+                     "and turn to the tool step by least squares. Where the light changes the "
+                     "part's outline itself (poor light), the registration of the whole "
+                     "silhouette moves with it as the blob's centre does.")
     channels = result.channels
     if channels and len(set(channels.values())) > 1:
         listed = ", ".join(f"{s}: {c}" for s, c in channels.items())
@@ -217,7 +223,7 @@ def why(result: Table1Result) -> list[str]:
                      "from there, not from the rotation features: the low side lamp puts the "
                      "gripper's shadow across the part, and in max(R,G,B) the shaded faces are "
                      "as dark as the table, so the blob's centre moves by millimetres; "
-                     "saturation is unchanged by shade. The baselines keep the paper's "
+                     "saturation is unchanged by shade. The paper's two baselines keep its "
                      "max(R,G,B) localisation.")
     return lines
 

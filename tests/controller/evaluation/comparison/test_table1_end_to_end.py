@@ -26,7 +26,7 @@ def out(tmp_path_factory):
 def test_writes_one_evaluate_report_per_system_and_lighting(out):
     reports = json.loads((out / "table1.json").read_text())
     assert [(r["system"], r["lighting"]) for r in reports] == [
-        (s, light) for s in ("gabor", "pca", "hough") for light in ("good", "poor")]
+        (s, light) for s in ("gabor", "pca", "hough", "align") for light in ("good", "poor")]
     for r in reports:
         assert r["trials"] == TRIALS and r["seed"] == SEED and r["train_images"] == 134
         assert sum(r["outcomes"].values()) == TRIALS
@@ -35,10 +35,11 @@ def test_writes_one_evaluate_report_per_system_and_lighting(out):
 def test_markdown_and_plots(out):
     md = (out / "table1.md").read_text()
     assert md.startswith("# Table 1 on the simulated cell")
-    for system in ("gabor", "pca", "hough"):
+    for system in ("gabor", "pca", "hough", "align"):
         for lighting in ("good", "poor"):
             assert f"| {system} | {lighting} |" in md
     assert "- poor light, gabor vs hough:" in md
+    assert "- poor light, gabor vs align:" in md
     for lighting in ("good", "poor"):
         assert (out / f"convergence-{lighting}.png").stat().st_size > 10_000
 

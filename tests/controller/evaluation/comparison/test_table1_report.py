@@ -104,3 +104,17 @@ def test_why_explains_ties_and_names_the_localisation_channels(result):
                                                           "hough": "max"})
     md = table1_markdown(with_channels, "<defaults>")
     assert "Localisation channels (gabor: saturation, hough: max)" in md
+
+
+def test_why_describes_the_alignment_servo_only_when_it_ran(result):
+    assert not any("image-alignment servo" in line for line in why(result))
+
+    def rename(key):
+        return ("align", key[1]) if key[0] == "hough" else key
+
+    with_align = dataclasses.replace(
+        result, reports=[{**r, "system": rename((r["system"], ""))[0]} for r in result.reports],
+        states={rename(k): v for k, v in result.states.items()},
+        outcomes={rename(k): v for k, v in result.outcomes.items()})
+    assert any("image-alignment servo" in line for line in why(with_align))
+    assert "- good light, gabor vs align:" in table1_markdown(with_align, "<defaults>")
