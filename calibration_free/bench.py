@@ -12,7 +12,10 @@ BLAS. Prints and writes JSON: median_us, p99_us, opencv_median_us, opencv_p99_us
 per-stage medians (stage_median_us), RMS error of the corrective steps on the frames
 (rms_error), and opencv_feature_rel_diff: the median relative difference between the two
 feature vectors (the centre filters agree exactly; the off-centre ones differ because the
-ROI window clips their envelopes while full-frame filtering does not).
+ROI window clips their envelopes while full-frame filtering does not). The image-alignment
+servo (``--system align``, trained on the same images) is timed on the same frames as the
+filter2D path: align_median_us, align_p99_us, align_ratio (its median over the Gabor
+path's: what a look costs against it).
 """
 
 from __future__ import annotations
@@ -31,6 +34,7 @@ import torch
 from threadpoolctl import threadpool_limits
 
 from calibration_free import angles
+from calibration_free.baselines.align.train import train_align
 from calibration_free.dataset import grid_offsets, random_offsets
 from calibration_free.filter2d_reference import Filter2DFeatures
 from calibration_free.perception import Percept, Perception
@@ -139,6 +143,9 @@ def measure(n_frames: int, n_opencv_frames: int, seed: int) -> dict:
                         *perception.locate(frame)), p.u_px, p.v_px) - p.features)
                     / np.linalg.norm(p.features)
                     for frame, p in zip(frames[:n_opencv_frames], percepts, strict=False)]
+    align = train_align(nn1_data, nn2_data, object_kind="cube", kappa=KAPPA,
+                        nominal_pose=NOMINAL_POSE)
+    align_us = _time_us(align.perceive, frames[:n_opencv_frames])
     stages = ("preprocess", "localise", "nn1", "roi", "features", "nn2")
     median, opencv_median = float(np.median(fast_us)), float(np.median(opencv_us))
     return {
@@ -159,6 +166,9 @@ def measure(n_frames: int, n_opencv_frames: int, seed: int) -> dict:
         "training_images": {"nn1": len(nn1_data), "nn2": len(nn2_data)},
         "rms_error": _rms_errors(percepts, labels),
         "opencv_feature_rel_diff": float(np.median(feature_diff)),
+        "align_median_us": float(np.median(align_us)),
+        "align_p99_us": float(np.percentile(align_us, 99)),
+        "align_ratio": float(np.median(align_us)) / median,
     }
 
 

@@ -27,8 +27,10 @@ def test_bench_writes_the_numbers_and_restores_threads(tmp_path, capsys):
     assert bench.run(parse(["--json", str(out), "--frames", "60", "--opencv-frames", "5"])) == 0
     result = json.loads(out.read_text())
     assert json.loads(capsys.readouterr().out) == result
-    for key in ("median_us", "p99_us", "opencv_median_us", "opencv_p99_us", "speedup"):
+    for key in ("median_us", "p99_us", "opencv_median_us", "opencv_p99_us", "speedup",
+                "align_median_us", "align_p99_us"):
         assert result[key] > 0, key
+    assert result["align_ratio"] == pytest.approx(result["align_median_us"] / result["median_us"])
     assert result["speedup"] == pytest.approx(result["opencv_median_us"] / result["median_us"])
     assert result["frames"] == 60 and result["opencv_frames"] == 5
     assert result["frame_shape"] == [144, 192, 3]
