@@ -58,6 +58,10 @@ class LoopConfig:
     reach_factor: a correction read beyond this many times the training range (the NN1
     grid's largest displacement) is not taken: the blob is not the taught part, or the part
     is not where it was taught, and the loop stops (``out_of_range``) without moving;
+    settle_frames: a full look whose first frame reads a step within ``settle_mm`` and
+    ``settle_deg`` (the loop is settling at the taught pose) reads this many frames and takes
+    their mean step (1: every look reads one frame, the paper's loop): near the pose the
+    readings' frame-to-frame noise is as large as what is left to correct;
     save_images: save each grabbed image as PNG next to the iteration log.
     """
 
@@ -66,6 +70,9 @@ class LoopConfig:
     converge_deg: float = field(default=0.3, metadata={"min": 0.0})
     max_loops: float = field(default=6.0, metadata={"min": 0.5})
     reach_factor: float = field(default=1.25, metadata={"min": 1.0})
+    settle_frames: int = field(default=1, metadata={"min": 1, "max": 32})
+    settle_mm: float = field(default=0.5, metadata={"min": 0.0})
+    settle_deg: float = field(default=2.0, metadata={"min": 0.0})
     save_images: bool = False
 
 
@@ -192,6 +199,9 @@ class PositioningLoop:
                 rot = estimator.estimate_rotation(tr)
                 record.estimates.update(rot.record)
                 step = _turn_within_limits(corrective_step(tr, rot), self.arm)
+                if cfg.settle_frames > 1 and math.hypot(step.dx_mm, step.dy_mm) <= \
+                        cfg.settle_mm and abs(step.dphi_deg) <= cfg.settle_deg:
+                    step = self._settle(estimator, step, record)
             record.commanded = step
             shift = math.hypot(step.dx_mm, step.dy_mm)
             t2 = time.perf_counter()
@@ -220,6 +230,29 @@ class PositioningLoop:
             record.executed, record.clipped, record.pose_after = \
                 motion.sent, motion.clipped, motion.pose
             self._write(record, kind, (t0, t1, t2, t3), frame.image)
+
+    def _settle(self, estimator: Estimator, first: ToolStep,
+                record: IterationRecord) -> ToolStep:
+        """The mean step of ``first`` and ``settle_frames - 1`` more frames' full estimates.
+        A frame where the part is not found, or whose step is outside the settle window
+        (``settle_mm``, ``settle_deg``; a misreading), is left out of the mean. The record
+        keeps every frame's step (``settle``, the first one first; null where not found)."""
+        cfg = self.config
+        steps, read = [first], [[first.dx_mm, first.dy_mm, first.dphi_deg]]
+        for _ in range(cfg.settle_frames - 1):
+            tr = estimator.estimate_translation(self.camera.grab().image)
+            if tr.status != "ok":
+                read.append(None)
+                continue
+            step = corrective_step(tr, estimator.estimate_rotation(tr))
+            read.append([step.dx_mm, step.dy_mm, step.dphi_deg])
+            if math.hypot(step.dx_mm, step.dy_mm) <= cfg.settle_mm and \
+                    abs(step.dphi_deg) <= cfg.settle_deg:
+                steps.append(step)
+        record.estimates["settle"] = read
+        n = len(steps)
+        return ToolStep(sum(s.dx_mm for s in steps) / n, sum(s.dy_mm for s in steps) / n, 0.0,
+                        sum(s.dphi_deg for s in steps) / n)
 
     def _write(self, record: IterationRecord, kind: LoopKind, clock: tuple[float, ...],
                image) -> None:

@@ -1,11 +1,13 @@
 """Loop logic of the positioning controller against a fake arm and a scripted estimator."""
 
+import dataclasses
 import json
 
 import pytest
 
 from controller.loop.iteration_log import IterationLog, read_log
 from controller.loop.positioning import LoopConfig, PositioningLoop
+from controller.systems.estimator import TranslationEstimate
 from drivers.core.pose import ToolStep
 from drivers.safety import SafetyLimits
 from tests.controller.loop.loop_fixtures import NOMINAL, TruthEstimator, truth_error
@@ -131,3 +133,68 @@ def test_log_lines_are_complete_json(tmp_path):
     lines = (tmp_path / "it.jsonl").read_text().splitlines()
     assert lines and all(json.loads(line)["run_id"] for line in lines)
     assert all((tmp_path / json.loads(line)["image"]).exists() for line in lines)
+
+
+class NoisyEstimator(TruthEstimator):
+    """The true step plus a scripted error per frame (cycled): frame-to-frame camera noise."""
+
+    def __init__(self, arm, errors, **kw):
+        super().__init__(arm, **kw)
+        self.errors, self.frames = errors, 0
+
+    def estimate_translation(self, image):
+        t = super().estimate_translation(image)
+        self.error = self.errors[self.frames % len(self.errors)]
+        self.frames += 1
+        if self.error is None:
+            return TranslationEstimate("no_object", reason="scripted miss")
+        return dataclasses.replace(t, dx_mm=t.dx_mm + self.error[0], dy_mm=t.dy_mm + self.error[1])
+
+    def estimate_rotation(self, translation):
+        r = super().estimate_rotation(translation)
+        return dataclasses.replace(r, dphi_deg=r.dphi_deg + self.error[2])
+
+
+def test_settling_looks_average_their_frames(tmp_path):
+    """Readings that scatter +-0.08 mm / +-0.4 deg around the truth: one frame a look moves
+    by the scatter and never meets the thresholds; two frames a look cancel it."""
+    errors = [(0.08, -0.08, 0.4), (-0.08, 0.08, -0.4)]
+    start = ToolStep(0.3, -0.2, 0.0, 1.0)
+    arm, cam, cfg = make(start, max_loops=4.0)
+    alone = PositioningLoop(arm, cam, cfg).run(NoisyEstimator(arm, errors))
+    assert alone.outcome == "budget"
+    arm, cam, cfg = make(start, max_loops=4.0, settle_frames=2)
+    est = NoisyEstimator(arm, errors)
+    with IterationLog(tmp_path / "it.jsonl") as log:
+        settled = PositioningLoop(arm, cam, cfg, log, lambda: truth_error(arm)).run(est)
+    assert settled.outcome == "converged" and settled.loops == 1.0
+    ex, ey, ephi = settled.states[-1].error
+    assert abs(ex) < 1e-6 and abs(ey) < 1e-6 and abs(ephi) < 1e-6
+    first, check = read_log(tmp_path / "it.jsonl")
+    assert len(first["settle"]) == 2 and est.frames == 4
+
+
+def test_settling_leaves_out_frames_without_the_part_or_off_the_window(tmp_path):
+    errors = [(0.0, 0.0, 0.0), None, (3.0, 0.0, 0.0), (0.0, 0.0, 0.0)]
+    arm, cam, cfg = make(ToolStep(0.2, 0.1, 0.0, 0.5), settle_frames=4)
+    with IterationLog(tmp_path / "it.jsonl") as log:
+        result = PositioningLoop(arm, cam, cfg, log, lambda: truth_error(arm)).run(
+            NoisyEstimator(arm, errors))
+    assert result.outcome == "converged"
+    first = read_log(tmp_path / "it.jsonl")[0]
+    good, missed, off, _ = first["settle"]
+    assert missed is None and off[0] == pytest.approx(good[0] + 3.0)
+    # the mean of the two good frames, which read the truth
+    assert [first["commanded"][k] for k in ("dx_mm", "dy_mm", "dphi_deg")] == \
+        pytest.approx(good, abs=1e-9)
+
+
+def test_only_settling_looks_read_more_frames(tmp_path):
+    arm, cam, cfg = make(ToolStep(3.0, 0.0, 0.0, 10.0), settle_frames=4)
+    est = NoisyEstimator(arm, [(0.0, 0.0, 0.0)], gain=0.9)
+    with IterationLog(tmp_path / "it.jsonl") as log:
+        PositioningLoop(arm, cam, cfg, log).run(est)
+    records = read_log(tmp_path / "it.jsonl")
+    # 3 mm / 10 deg, then 0.3 mm / 1 deg: one frame, then four; then the check settles too
+    assert "settle" not in records[0] and len(records[1]["settle"]) == 4
+    assert est.frames == 1 + 4 * (len(records) - 1)
