@@ -37,8 +37,8 @@ class AlignConfig:
     """Config of the image-alignment servo (``perception.align``).
 
     Attributes:
-        margin_px: the template is the part's largest extent at the taught pose plus this on
-            every side.
+        margin_px: the template's side is the diagonal of the part's box at the taught pose
+            (the part fits in it at any turn) plus this on every side.
         scan_step_deg: the rotation scan's step over the symmetry period.
         ecc_iterations: ECC's largest number of iterations.
         ecc_epsilon: ECC stops when the correlation improves by less than this.

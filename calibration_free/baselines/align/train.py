@@ -82,7 +82,7 @@ def train_align(nn1_data: Dataset, nn2_data: Dataset, *, object_kind: str, kappa
     taught = [(name, i) for (name, i), here in zip(samples, at_nominal, strict=True) if here]
     extent = 0
     for name, i in taught:
-        x, y, w, h = cv2.boundingRect(prep.found[name][i].part_mask)
+        _, _, w, h = cv2.boundingRect(prep.found[name][i].part_mask)
         extent = max(extent, int(math.ceil(math.hypot(w, h))))
     size = extent + 2 * config.margin_px
     image = np.mean([cv2.getRectSubPix(silhouette(name, i), (size, size), nominal_uv)
