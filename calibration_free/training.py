@@ -469,10 +469,15 @@ def _translation_samples(uv: np.ndarray, labels: np.ndarray, kappa: int
     (u, v, sin, cos of kappa dphi), targets (dx_mm, dy_mm), and which were taken at the
     taught pose."""
     s_rot, c_rot = angles.encode(labels[:, 2], kappa)
-    at_nominal = (np.hypot(labels[:, 0], labels[:, 1]) < NOMINAL_TOL_MM) \
-        & (np.abs(labels[:, 2]) < NOMINAL_TOL_DEG)
     return (np.column_stack([uv, s_rot, c_rot]), np.ascontiguousarray(labels[:, :2]),
-            at_nominal)
+            at_taught_pose(labels))
+
+
+def at_taught_pose(labels: np.ndarray) -> np.ndarray:
+    """Which of the (N, 3) labels [dx_mm, dy_mm, dphi_deg] were taken at the taught pose
+    (within ``NOMINAL_TOL_MM`` and ``NOMINAL_TOL_DEG``)."""
+    return (np.hypot(labels[:, 0], labels[:, 1]) < NOMINAL_TOL_MM) \
+        & (np.abs(labels[:, 2]) < NOMINAL_TOL_DEG)
 
 
 def near_samples(dxdy: np.ndarray, nn2_labels: np.ndarray) -> tuple[float, np.ndarray]:

@@ -30,8 +30,7 @@ from calibration_free.errors import TrainingError
 from calibration_free.localise import Polarity
 from calibration_free.preprocess import Channel
 from calibration_free.training import (
-    NOMINAL_TOL_DEG,
-    NOMINAL_TOL_MM,
+    at_taught_pose,
     check_part,
     prepare_training,
     training_sets,
@@ -66,8 +65,7 @@ def train_align(nn1_data: Dataset, nn2_data: Dataset, *, object_kind: str, kappa
     prep = prepare_training(sets, polarity, localisation_channel)
     samples = [(name, int(i)) for name in sets for i in prep.usable[name]]
     labels = np.array([sets[name].labels[i] for name, i in samples])
-    at_nominal = (np.hypot(labels[:, 0], labels[:, 1]) < NOMINAL_TOL_MM) \
-        & (np.abs(labels[:, 2]) < NOMINAL_TOL_DEG)
+    at_nominal = at_taught_pose(labels)
     if not at_nominal.any():
         raise TrainingError("align: no training image at the taught pose to take the "
                             "template from")
