@@ -4,8 +4,8 @@ Format: a finepos model file (``calibration_free.model_file``: safetensors, so l
 execute code; a JSON header; a sha256 over both) of kind ``gabor``. Arrays: the networks
 (``nn1.*``, ``nn1_rot.*``, ``nn1_near.*``, ``nn2.*``, see ``NumpyMLP.to_arrays``). JSON:
 object kind, kappa, nominal pose, the front end (``frame_px``, ``intensity``,
-``localisation``: see ``FrontEnd.to_info``), Gabor configuration, ``near_mm``, training
-metadata.
+``localisation``: see ``FrontEnd.to_info``), Gabor configuration, ``near_mm``, the axis map
+(``axis``, or null), training metadata.
 
 Saving is atomic. Loading returns a new bundle or raises BundleError; it never modifies
 anything, so a failed load leaves the caller's current bundle in place.
@@ -19,6 +19,7 @@ from typing import Any, ClassVar
 
 import numpy as np
 
+from calibration_free.axis import AxisMap
 from calibration_free.errors import BundleError
 from calibration_free.front_end import FrontEnd
 from calibration_free.gabor import GaborConfig
@@ -28,7 +29,8 @@ from drivers.core.pose import Pose
 from drivers.core.typed_config import from_mapping, to_mapping
 
 KIND = "gabor"
-FORMAT_VERSION = 5  # 2: max_elongation; 3: channel, nominal_uv_px; 4: nn1_rot; 5: nn1_near
+FORMAT_VERSION = 6  # 2: max_elongation; 3: channel, nominal_uv_px; 4: nn1_rot; 5: nn1_near;
+# 6: axis
 POSE_KEYS = ("x_mm", "y_mm", "z_mm", "o_deg", "a_deg", "t_deg")
 
 
@@ -54,6 +56,9 @@ class ModelBundle(TaughtModel):
             at most ``near_mm``: where the loop makes its full loops and settles.
         near_mm: up to this translation (nn1_rot's reading, mm) the correction is added.
         nn2: Gabor features -> (sin(kappa dphi), cos(kappa dphi)).
+        axis: for an elongated part, the map from its long axis to the turn near the taught
+            pose (``calibration_free.axis``), which takes over from NN2 there; None: NN2
+            alone.
         training: JSON-able training metadata (loss curves, seconds, sample counts, seed).
         format_version: file format version this bundle follows.
     """
@@ -61,8 +66,8 @@ class ModelBundle(TaughtModel):
     file_kind: ClassVar[str] = KIND
     file_version: ClassVar[int] = FORMAT_VERSION
     # A version-4 file has no near net: it loads with nn1_rot in its place, never used
-    # (near_mm 0), so it perceives as it did.
-    older_versions: ClassVar[tuple[int, ...]] = (4,)
+    # (near_mm 0), so it perceives as it did; files before version 6 have no axis map.
+    older_versions: ClassVar[tuple[int, ...]] = (4, 5)
 
     gabor: GaborConfig
     nn1: NumpyMLP
@@ -70,6 +75,7 @@ class ModelBundle(TaughtModel):
     nn1_near: NumpyMLP
     near_mm: float
     nn2: NumpyMLP
+    axis: AxisMap | None = None
     format_version: int = FORMAT_VERSION
 
     def __post_init__(self) -> None:
@@ -96,6 +102,9 @@ class ModelBundle(TaughtModel):
         if isinstance(self.near_mm, bool) or not isinstance(self.near_mm, (int, float)) \
                 or not (math.isfinite(self.near_mm) and self.near_mm >= 0.0):
             raise BundleError(f"near_mm: must be a finite number >= 0, got {self.near_mm!r}")
+        if self.axis is not None and (not isinstance(self.axis, AxisMap)
+                                      or self.axis.kappa != self.kappa):
+            raise BundleError(f"axis: must be an axis map of the part's kappa {self.kappa}")
         if self.nn2.n_inputs != self.gabor.n_filters or self.nn2.n_outputs != 2:
             raise BundleError(f"nn2: must map {self.gabor.n_filters} features to 2 outputs, "
                               f"has layers {self.nn2.layer_sizes}")
@@ -106,13 +115,15 @@ class ModelBundle(TaughtModel):
         return Pose(**self.nominal_pose)
 
     def system_info(self) -> dict[str, Any]:
-        """The Gabor system's own JSON: the filter-bank configuration (``gabor``) and where
-        the near translation net takes over (``near_mm``).
+        """The Gabor system's own JSON: the filter-bank configuration (``gabor``), where
+        the near translation net takes over (``near_mm``) and the axis map (``axis``).
 
         Returns:
-            {"gabor": ..., "near_mm": ...}, merged into the file's JSON by ``to_info``.
+            {"gabor": ..., "near_mm": ..., "axis": ...}, merged into the file's JSON by
+            ``to_info``.
         """
-        return {"gabor": to_mapping(self.gabor), "near_mm": float(self.near_mm)}
+        return {"gabor": to_mapping(self.gabor), "near_mm": float(self.near_mm),
+                "axis": None if self.axis is None else self.axis.to_info()}
 
     def arrays(self) -> dict[str, np.ndarray]:
         """The networks' weights as named arrays (what the file stores besides the JSON).
@@ -132,7 +143,10 @@ class ModelBundle(TaughtModel):
             nn1_near, near_mm = nn1_rot, 0.0
         else:
             nn1_near, near_mm = NumpyMLP.from_arrays(arrays, "nn1_near"), info["near_mm"]
+        axis = None
+        if info["format_version"] >= 6 and info.get("axis") is not None:
+            axis = AxisMap.from_info(info["axis"])
         return cls(**taught, gabor=from_mapping(GaborConfig, info["gabor"], "gabor"),
                    nn1=NumpyMLP.from_arrays(arrays, "nn1"), nn1_rot=nn1_rot,
                    nn1_near=nn1_near, near_mm=near_mm, nn2=NumpyMLP.from_arrays(arrays, "nn2"),
-                   format_version=info["format_version"])
+                   axis=axis, format_version=info["format_version"])

@@ -39,6 +39,10 @@ class Percept:
         rot_mm: ``nn1_rot``'s reading (without the near correction); None like
             ``features``.
         near: ``full_mm`` has the near correction.
+        nn2_deg: NN2's own reading (decoded from nn2_sc); None like ``features``.
+        axis_deg: the long axis' reading (``bundle.axis``: an elongated part), or None
+            (no axis map, no clear axis, or one that disagrees with NN2); ``dphi_deg`` is
+            this one where there is one, else NN2's, and ``nn1_rot`` sees the one taken.
     """
 
     localisation: Localisation
@@ -51,6 +55,8 @@ class Percept:
     normalised: np.ndarray | None = field(default=None, repr=False, compare=False)
     rot_mm: tuple[float, float] | None = None
     near: bool = False
+    nn2_deg: float | None = None
+    axis_deg: float | None = None
 
     @property
     def ok(self) -> bool:
@@ -133,9 +139,16 @@ class Perception:
         features = self._bank.features(roi)
         t5 = clock()
         s, c = self.bundle.nn2(features)
-        dphi = angles.decode(float(s), float(c), self.bundle.kappa)
+        dphi = nn2_deg = angles.decode(float(s), float(c), self.bundle.kappa)
         norm = max(float(np.hypot(s, c)), 1e-9)
-        inputs = np.array((loc.u_px, loc.v_px, float(s) / norm, float(c) / norm))
+        sc = (float(s) / norm, float(c) / norm)
+        axis_deg = None
+        if self.bundle.axis is not None:
+            axis_deg = self.bundle.axis.reading(roi, loc.u_px, loc.v_px, nn2_deg)
+            if axis_deg is not None:
+                dphi = axis_deg
+                sc = tuple(float(v) for v in angles.encode(dphi, self.bundle.kappa))
+        inputs = np.array((loc.u_px, loc.v_px, *sc))
         dx_rot, dy_rot = self.bundle.nn1_rot(inputs)
         rot_mm = (float(dx_rot), float(dy_rot))
         near = math.hypot(*rot_mm) <= self.bundle.near_mm
@@ -148,7 +161,7 @@ class Perception:
         timings.update(roi=(t4 - t3) / 1e3, features=(t5 - t4) / 1e3, nn2=(t6 - t5) / 1e3,
                        total=timings["total"] + (t6 - t3) / 1e3)
         return Percept(loc, percept.nn1_mm, features, (float(s), float(c)), dphi, timings,
-                       full_mm, percept.normalised, rot_mm, near)
+                       full_mm, percept.normalised, rot_mm, near, nn2_deg, axis_deg)
 
     def perceive(self, image: np.ndarray) -> Percept:
         """The whole path in one pass: corrective translation (NN1) and rotation (NN2).

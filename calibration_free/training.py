@@ -22,6 +22,7 @@ import cv2
 import numpy as np
 
 from calibration_free import angles
+from calibration_free.axis import fit_axis
 from calibration_free.bundle import ModelBundle
 from calibration_free.dataset import Dataset
 from calibration_free.errors import TrainingError
@@ -66,6 +67,11 @@ MIN_NEAR_SAMPLES = 9
 # correction between them (without it, 10 units on 70 samples wiggle between the grid's
 # three positions per axis).
 NN1_NEAR_WEIGHT_DECAY = 1e-2
+# A part without symmetry: its silhouette's centre circles the grasp point over the whole
+# circle, and the near samples span every turn (screw, NN2 set's images turned 30-60 deg: RMS
+# x 0.23 -> 0.16 mm with 1e-3; in the loop, good light, 200 trials, seed 3, RMS x / y after
+# 2.5 loops 0.12 / 0.07 -> 0.08 / 0.03 mm; 1e-4 fitted as 1e-3).
+NN1_NEAR_WEIGHT_DECAY_NO_SYMMETRY = 1e-3
 # Training images whose label is this close to zero were taken at the taught pose.
 NOMINAL_TOL_MM = 0.05
 NOMINAL_TOL_DEG = 0.05
@@ -90,6 +96,12 @@ OTSU_STRIDE = 2
 def default_nn2_weight_decay(kappa: int) -> float:
     """NN2's default L2 penalty for a part of symmetry count ``kappa`` (see NN2_WEIGHT_DECAY)."""
     return NN2_WEIGHT_DECAY_NO_SYMMETRY if kappa == 1 else NN2_WEIGHT_DECAY
+
+
+def default_near_weight_decay(kappa: int) -> float:
+    """The near translation net's L2 penalty for a part of symmetry count ``kappa`` (see
+    NN1_NEAR_WEIGHT_DECAY)."""
+    return NN1_NEAR_WEIGHT_DECAY_NO_SYMMETRY if kappa == 1 else NN1_NEAR_WEIGHT_DECAY
 
 
 def _check_sets(sets: dict[str, Dataset]) -> tuple[int, int]:
@@ -364,7 +376,8 @@ def train_bundle(nn1_data: Dataset, nn2_data: Dataset, *, object_kind: str, kapp
                  nn1_extra: Dataset | None = None, polarity: Polarity = "bright",
                  nn1_epochs: int = NN1_EPOCHS, nn2_epochs: int = NN2_EPOCHS,
                  nn2_weight_decay: float | None = None,
-                 localisation_channel: Channel | Literal["auto"] = "auto") -> ModelBundle:
+                 localisation_channel: Channel | Literal["auto"] = "auto",
+                 fine_axis: bool = True) -> ModelBundle:
     """Train NN1 and NN2 from image datasets and pack everything into a ModelBundle.
 
     Steps: the front end (``prepare_training``: intensity statistics of the max-channel
@@ -394,6 +407,8 @@ def train_bundle(nn1_data: Dataset, nn2_data: Dataset, *, object_kind: str, kapp
             (normalised max(R, G, B), the paper's), "saturation" (unchanged by light and
             shadow for a coloured part on a grey table) or "auto" (whichever separates part
             and background better on the training images).
+        fine_axis: for an elongated part (screw, ledge), fit the map from its long axis to
+            the turn near the taught pose (``calibration_free.axis``); False: NN2 alone.
 
     Returns:
         The bundle: the front end (with the taught pose's image position), the networks and
@@ -432,12 +447,16 @@ def train_bundle(nn1_data: Dataset, nn2_data: Dataset, *, object_kind: str, kapp
     residual = dxdy[near] - nn1_rot.model(uvsc[near])
     nn1_near, nn1_near_zero_offset = _train_pinned(uvsc[near], residual, at_nominal[near],
                                                    seed + 3, nn1_epochs, NN1_ROT_HIDDEN,
-                                                   NN1_NEAR_WEIGHT_DECAY)
+                                                   default_near_weight_decay(kappa))
 
     rois = [prep.front.feature_roi(prep.normalised["nn2"][i], prep.found["nn2"][i], gabor.roi_px)
             for i in prep.usable["nn2"]]
-    nn2 = train_nn2(rois, nn2_data.labels[prep.usable["nn2"], 2], kappa, gabor, seed=seed,
+    nn2_labels = nn2_data.labels[prep.usable["nn2"]]
+    nn2 = train_nn2(rois, nn2_labels[:, 2], kappa, gabor, seed=seed,
                     hidden=nn2_hidden, epochs=nn2_epochs, weight_decay=nn2_weight_decay)
+    # An elongated part's long axis reads the turn near the taught pose (calibration_free.axis)
+    axis = (fit_axis(rois, prep.centres("nn2"), nn2_labels[:, 2], at_taught_pose(nn2_labels),
+                     kappa) if fine_axis else None)
 
     training = {
         "seed": seed,
@@ -447,10 +466,14 @@ def train_bundle(nn1_data: Dataset, nn2_data: Dataset, *, object_kind: str, kapp
         "nn1": {**_summary(nn1), "zero_offset_mm": nn1_zero_offset},
         "nn1_rot": {**_summary(nn1_rot), "zero_offset_mm": nn1_rot_zero_offset},
         "nn1_near": {**_summary(nn1_near), "zero_offset_mm": nn1_near_zero_offset,
-                     "samples": int(near.sum()), "near_mm": near_mm},
+                     "samples": int(near.sum()), "near_mm": near_mm,
+                     "weight_decay": default_near_weight_decay(kappa)},
         "nn2": {**_summary(nn2), "weight_decay": (default_nn2_weight_decay(kappa)
                                                   if nn2_weight_decay is None
                                                   else nn2_weight_decay)},
+        "axis": ({"samples": axis.samples, "whole_rms_deg": axis.whole_rms_deg,
+                  "near_rms_deg": axis.near_rms_deg, "elongation": axis.elongation}
+                 if axis is not None else None),
         "seconds": time.perf_counter() - start,
         "created_utc": time.strftime("%Y-%m-%dT%H:%M:%SZ", time.gmtime()),
     }
@@ -460,7 +483,7 @@ def train_bundle(nn1_data: Dataset, nn2_data: Dataset, *, object_kind: str, kapp
     return ModelBundle(object_kind=object_kind, kappa=kappa, nominal_pose=pose, front=front,
                        gabor=gabor, nn1=nn1.model, nn1_rot=nn1_rot.model,
                        nn1_near=nn1_near.model, near_mm=near_mm, nn2=nn2.model,
-                       training=training)
+                       axis=axis, training=training)
 
 
 def _translation_samples(uv: np.ndarray, labels: np.ndarray, kappa: int

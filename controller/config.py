@@ -114,7 +114,9 @@ class PerceptionConfig:
     baseline systems' settings (``finepos evaluate --system pca|hough``); align: the
     image-alignment servo's (``--system align``); seed: training seed;
     nn1_uses_nn2_set: also train NN1 on the NN2 grid's images (they cost no extra motion and
-    make NN1 precise near the nominal pose, where the loop's fixed point is).
+    make NN1 precise near the nominal pose, where the loop's fixed point is);
+    axis: for an elongated part (screw, ledge) the turn near the taught pose is read from the
+    silhouette's long axis (``calibration_free.axis``; false: NN2 alone).
     """
 
     gabor: GaborConfig = GaborConfig()
@@ -126,6 +128,7 @@ class PerceptionConfig:
     align: AlignConfig = AlignConfig()
     seed: int = 0
     nn1_uses_nn2_set: bool = True
+    axis: bool = True
 
     def __post_init__(self) -> None:
         if not 1 <= len(self.nn2_hidden) <= 8:  # with <= 4096 units each: fits in memory

@@ -60,11 +60,15 @@ class GaborEstimator:
 
 
 def _translation_readings(p: Percept) -> dict[str, Any]:
-    """The rotation-aware nets' readings for the iteration record: ``nn1_rot``'s, and the
-    translation with the near net's correction when it was added."""
+    """The rotation-aware nets' readings for the iteration record: ``nn1_rot``'s, the
+    translation with the near net's correction when it was added, and NN2's and the long
+    axis' rotation readings when the axis read one (``nn2_deg``, ``axis_deg``)."""
     readings: dict[str, Any] = {"nn1_rot": list(p.rot_mm)}
     if p.near:
         readings["nn1_near"] = list(p.full_mm)
+    if p.axis_deg is not None:
+        readings["nn2_deg"] = p.nn2_deg
+        readings["axis_deg"] = p.axis_deg
     return readings
 
 
@@ -87,7 +91,8 @@ class GaborSystem(VisionSystem):
             nn2_hidden=tuple(perception_cfg.nn2_hidden),
             nn2_weight_decay=perception_cfg.nn2_weight_decay,
             localisation_channel=perception_cfg.localisation_channel, seed=perception_cfg.seed,
-            nn1_extra=nn2 if perception_cfg.nn1_uses_nn2_set else None)
+            nn1_extra=nn2 if perception_cfg.nn1_uses_nn2_set else None,
+            fine_axis=perception_cfg.axis)
         return TrainedModel(cls.name, bundle, time.perf_counter() - t0, len(nn1) + len(nn2),
                             bundle.gabor.n_filters)
 

@@ -8,6 +8,7 @@ import json
 import numpy as np
 import pytest
 
+from calibration_free.axis import AxisMap
 from calibration_free.bundle import FORMAT_VERSION, KIND, ModelBundle
 from calibration_free.errors import BundleError
 from calibration_free.gabor import GaborConfig
@@ -126,7 +127,7 @@ def test_a_file_in_the_version_4_layout_loads_and_is_still_written(bundle, cell,
     # saving writes the same layout, plus the part's colour and the near net's range
     written = bundle.to_info()
     expected = version_4_info(bundle)
-    assert sorted(written) == sorted([*expected, "near_mm"])
+    assert sorted(written) == sorted([*expected, "near_mm", "axis"])
     assert written["localisation"] == {**expected["localisation"],
                                        "chroma": list(bundle.front.chroma),
                                        "chroma_tolerance": bundle.front.chroma_tolerance,
@@ -197,3 +198,36 @@ def test_failed_save_keeps_the_old_file(bundle, tmp_path):
         broken.save(path)
     assert path.read_bytes() == good
     assert json.loads(json.dumps(bundle.training))["nn1"]["layers"] == [2, 3, 2]
+
+
+def an_axis_map() -> AxisMap:
+    """An axis map for a part of kappa 1, every field spelled out."""
+    return AxisMap(kappa=1, axis0_deg=-89.9, elongation=1.7, uv0_px=(95.7, 66.7),
+                   whole=(0.09, -6.5, -0.04, -7.8, -0.02, 0.54, -0.02, 0.51, 0.01, 0.11, 0.006),
+                   near=(0.72, -0.008, 0.28, -0.05), near_range_deg=33.4, whole_rms_deg=0.72,
+                   near_rms_deg=0.33, samples=67)
+
+
+def test_an_axis_map_round_trips_and_must_match_the_part(bundle, tmp_path):
+    screw = dataclasses.replace(bundle, object_kind="screw", kappa=1, axis=an_axis_map())
+    path = tmp_path / "screw.bundle"
+    screw.save(path)
+    again = ModelBundle.load(path, expect_object="screw")
+    assert again.axis == screw.axis and again.to_info()["axis"] == screw.to_info()["axis"]
+    with pytest.raises(BundleError, match="axis: must be an axis map of the part's kappa 4"):
+        dataclasses.replace(bundle, axis=an_axis_map())
+    info, tensors = info_and_tensors(screw)
+    info["axis"] = {**info["axis"], "near": info["axis"]["near"][:2]}
+    path.write_bytes(pack(info, tensors))
+    with pytest.raises(BundleError, match="axis: whole needs 11 numbers, near 4"):
+        ModelBundle.load(path)
+
+
+def test_a_version_5_file_has_no_axis_map(bundle, tmp_path):
+    screw = dataclasses.replace(bundle, object_kind="screw", kappa=1, axis=an_axis_map())
+    info, tensors = info_and_tensors(screw)
+    del info["axis"]
+    path = tmp_path / "v5.bundle"
+    path.write_bytes(pack(info, tensors, version=5))
+    old = ModelBundle.load(path, expect_object="screw")
+    assert old.axis is None and old.format_version == 5
