@@ -9,6 +9,7 @@ side, and never take a reading NN2 disagrees with.
 
 from __future__ import annotations
 
+import dataclasses
 import math
 
 import cv2
@@ -17,6 +18,7 @@ import pytest
 
 from calibration_free.axis import (
     AGREE_DEG,
+    WHOLE_MAX_RMS_DEG,
     AxisMap,
     axis_of,
     fit_axis,
@@ -124,6 +126,19 @@ def test_a_reading_nn2_disagrees_with_is_not_taken():
     assert (u0, v0) == pytest.approx(axis.uv0_px)
 
 
+def test_a_whole_circle_map_that_fits_badly_reads_only_near_the_taught_pose():
+    rois, uv, dphi, taught = grid(2)
+    axis = fit_axis(rois, uv, dphi, taught, 2)
+    assert axis.whole_reads and axis.whole_rms_deg < WHOLE_MAX_RMS_DEG
+    near_only = dataclasses.replace(axis, whole_reads=False)
+    roi, (u, v) = part_roi(40.0, (0.0, 0.0), 2)
+    assert axis.reading(roi, u, v, 42.0) is not None
+    assert near_only.reading(roi, u, v, 42.0) is None  # NN2's reading stands there
+    roi, (u, v) = part_roi(6.0, (0.0, 0.0), 2)
+    assert near_only.reading(roi, u, v, 8.0) == pytest.approx(6.0, abs=0.3)
+    assert near_only.reading(roi, u, v, 8.0) == axis.reading(roi, u, v, 8.0)
+
+
 def test_no_axis_for_a_round_part_or_a_symmetric_one():
     rois, uv, dphi, taught = grid(1)
     assert fit_axis(rois, uv, dphi, taught, 4) is None
@@ -142,6 +157,7 @@ def test_the_map_round_trips_and_bad_files_are_refused():
                        ({**info, "kappa": 4}, "kappa must be 1 or 2"),
                        ({k: v for k, v in info.items() if k != "near"}, "needs the keys"),
                        ({**info, "near": "x"}, "finite"),
+                       ({**info, "whole_reads": "yes"}, "whole_reads must be true or false"),
                        ([1, 2], "needs the keys")):
         with pytest.raises(BundleError, match=match):
             AxisMap.from_info(bad)
