@@ -195,8 +195,8 @@ class AxisMap:
             BundleError: not a mapping with the fields ``to_info`` writes.
         """
         keys = ("kappa", "axis0_deg", "elongation", "uv0_px", "whole", "near",
-                "near_range_deg", "whole_reads", "window_deg", "agree_deg", "whole_rms_deg", "near_rms_deg",
-                "samples")
+                "near_range_deg", "whole_reads", "window_deg", "agree_deg", "whole_rms_deg",
+                "near_rms_deg", "samples")
         if not isinstance(info, dict) or sorted(info) != sorted(keys):
             raise BundleError(f"axis: needs the keys {', '.join(keys)}")
         try:
