@@ -21,6 +21,7 @@ the images near it (psi, its cube and the shift), takes over.
 
 from __future__ import annotations
 
+import logging
 import math
 from dataclasses import dataclass
 from typing import Any
@@ -28,7 +29,9 @@ from typing import Any
 import cv2
 import numpy as np
 
-from calibration_free.errors import BundleError, TrainingError
+from calibration_free.errors import BundleError
+
+logger = logging.getLogger(__name__)
 
 # The near map is fitted on the NN2 set's images within NEAR_FIT_DEG of the taught pose and
 # reads where the whole-circle map reads within WINDOW_DEG.
@@ -219,8 +222,8 @@ def fit_axis(rois: list[np.ndarray], uv: np.ndarray, dphi_deg: np.ndarray,
         at_taught: (N,) which were taken at the taught pose.
         kappa: the part's rotational symmetry count.
 
-    Raises:
-        TrainingError: an elongated part with too few samples near the taught pose.
+    An elongated part with fewer than MIN_NEAR_SAMPLES images near the taught pose (a
+    smaller NN2 grid than the default) gets none either, with a warning.
     """
     if kappa > 2 or not at_taught.any():
         return None
@@ -246,9 +249,10 @@ def fit_axis(rois: list[np.ndarray], uv: np.ndarray, dphi_deg: np.ndarray,
     whole_rms = float(np.sqrt(np.mean((whole_terms @ whole - target) ** 2)))
     near = clear & (np.abs(dphi_deg) <= NEAR_FIT_DEG) & (np.abs(near_psi) < 80.0)
     if int(near.sum()) < MIN_NEAR_SAMPLES:
-        raise TrainingError(f"axis: only {int(near.sum())} NN2 images of the elongated part "
-                            f"within {NEAR_FIT_DEG:.0f} deg of the taught pose, needs "
-                            f"{MIN_NEAR_SAMPLES}")
+        logger.warning("no axis map: only %d NN2 images of the elongated part within %.0f deg "
+                       "of the taught pose, it needs %d (NN2 reads the turn alone)",
+                       int(near.sum()), NEAR_FIT_DEG, MIN_NEAR_SAMPLES)
+        return None
     near_terms = _near_terms(near_psi[near], du[near], dv[near])
     near_coef, *_ = np.linalg.lstsq(near_terms, dphi_deg[near], rcond=None)
     near_rms = float(np.sqrt(np.mean((near_terms @ near_coef - dphi_deg[near]) ** 2)))

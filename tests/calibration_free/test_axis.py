@@ -139,8 +139,14 @@ def test_a_whole_circle_map_that_fits_badly_reads_only_near_the_taught_pose():
     assert near_only.reading(roi, u, v, 8.0) == axis.reading(roi, u, v, 8.0)
 
 
-def test_no_axis_for_a_round_part_or_a_symmetric_one():
+def test_no_axis_for_a_round_part_or_a_symmetric_one(caplog):
     rois, uv, dphi, taught = grid(1)
+    # a small NN2 grid (a 3x3x3 one: 120 deg apart for the screw) cannot fit the near map
+    sparse = (np.abs(dphi) > 30.0) | taught
+    with caplog.at_level("WARNING", logger="calibration_free.axis"):
+        assert fit_axis([r for r, k in zip(rois, sparse, strict=True) if k], uv[sparse],
+                        dphi[sparse], taught[sparse], 1) is None
+    assert "no axis map: only 4 NN2 images" in caplog.text
     assert fit_axis(rois, uv, dphi, taught, 4) is None
     discs = [part_roi(p, (0.0, 0.0), round_part=True)[0] for p in dphi]
     assert fit_axis(discs, uv, dphi, taught, 1) is None
