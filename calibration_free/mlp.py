@@ -18,6 +18,7 @@ import numpy as np
 import torch
 
 from calibration_free.errors import TrainingError
+from calibration_free.kernels import mlp_forward
 
 # Columns whose training spread is below this are left unscaled (a constant input or output).
 _MIN_SPREAD = 1e-12
@@ -47,8 +48,13 @@ class NumpyMLP:
         folded_b[0] = folded_b[0] - folded_w[0] @ self.x_mean
         folded_w[-1] = self.y_std[:, None] * folded_w[-1]
         folded_b[-1] = self.y_std * folded_b[-1] + self.y_mean
-        self._hidden = list(zip(folded_w[:-1], folded_b[:-1], strict=True))
-        self._out_w, self._out_b = folded_w[-1], folded_b[-1]
+        self._hidden = [(np.ascontiguousarray(w), np.ascontiguousarray(b))
+                        for w, b in zip(folded_w[:-1], folded_b[:-1], strict=True)]
+        self._out_w = np.ascontiguousarray(folded_w[-1])
+        self._out_b = np.ascontiguousarray(folded_b[-1])
+        # one hidden layer (every network of the default pipeline): one compiled call a look
+        self._one_layer = ((*self._hidden[0], self._out_w, self._out_b)
+                           if len(self._hidden) == 1 else None)
 
     def _check(self) -> None:
         if not self.weights or len(self.weights) != len(self.biases):
@@ -91,6 +97,11 @@ class NumpyMLP:
         """Outputs for one input vector (n_in,) or a batch (N, n_in), in output units."""
         h = x
         if h.ndim == 1:
+            if self._one_layer is not None:
+                try:
+                    return mlp_forward(h, *self._one_layer)
+                except TypeError:  # not a contiguous float32 or float64 vector
+                    pass
             for w, b in self._hidden:
                 h = np.tanh(w @ h + b)
             return self._out_w @ h + self._out_b

@@ -102,6 +102,26 @@ def test_numpy_inference_matches_the_unfolded_network():
     assert model.layer_sizes == (3, 6, 4, 2)
 
 
+@pytest.mark.parametrize("dtype", [np.float32, np.float64])
+def test_one_hidden_layer_takes_the_compiled_path_with_the_same_outputs(dtype):
+    rng = np.random.default_rng(6)
+    x, y = rng.normal(0.0, 2.0, size=(40, 36)), rng.normal(size=(40, 2))
+    model = train_mlp(x, y, (12,), seed=0, epochs=30).model
+    h = np.tanh((x - model.x_mean) / model.x_std @ model.weights[0].T + model.biases[0])
+    expected = (h @ model.weights[1].T + model.biases[1]) * model.y_std + model.y_mean
+    batch = x.astype(dtype)
+    for i in (0, 17, 39):
+        one = model(batch[i])  # a vector: the compiled kernel
+        np.testing.assert_allclose(one, model(batch[i:i + 1])[0], rtol=1e-12, atol=1e-12)
+        np.testing.assert_allclose(one, expected[i], rtol=1e-5, atol=1e-5)
+    # a strided vector (a column of a batch) or whole numbers still read through numpy
+    column = np.ascontiguousarray(batch.T).T[3]
+    assert not column.flags.c_contiguous
+    np.testing.assert_allclose(model(column), model(batch[3]), rtol=1e-12, atol=1e-12)
+    np.testing.assert_allclose(model(np.round(x[5]).astype(int)),
+                               model(np.round(x[5])), rtol=1e-12, atol=1e-12)
+
+
 def test_arrays_round_trip_and_validation():
     rng = np.random.default_rng(5)
     model = train_mlp(rng.normal(size=(10, 2)), rng.normal(size=(10, 2)), (3,), epochs=5).model
