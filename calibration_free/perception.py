@@ -3,7 +3,8 @@
 The bundle's front end (max channel -> normalisation, or saturation -> localisation) -> NN1
 (centre -> dx, dy): the half-loop path, ``Perception.translation``. ``Perception.rotation``
 goes on from that percept: 50x50 ROI -> 36 Gabor features -> NN2 (features -> sin/cos of kappa
-dphi) -> dphi, and the full loop's translation. ``perceive`` is both in one pass.
+dphi) -> dphi (for an elongated part read from its long axis where the bundle has an axis map,
+``calibration_free.axis``), and the full loop's translation. ``perceive`` is both in one pass.
 """
 
 from __future__ import annotations
