@@ -70,12 +70,8 @@ def axis_of(roi: np.ndarray) -> tuple[float, float]:
     return angle, math.sqrt((mean + root) / small)
 
 
-def wrap_half(deg: float | np.ndarray) -> float | np.ndarray:
-    """An axis direction difference wrapped to [-90, 90) deg."""
-    return (np.asarray(deg) + 90.0) % 180.0 - 90.0
-
-
-def _wrap(deg: np.ndarray, period: float) -> np.ndarray:
+def _wrap(deg: float | np.ndarray, period: float) -> float | np.ndarray:
+    """``deg`` wrapped to [-period / 2, period / 2) (period 180: an axis direction)."""
     return (deg + period / 2.0) % period - period / 2.0
 
 
@@ -163,7 +159,7 @@ class AxisMap:
         period = 360.0 / self.kappa
         du = np.full(2, u_px - self.uv0_px[0])
         dv = np.full(2, v_px - self.uv0_px[1])
-        near_psi = float(wrap_half(angle - self.axis0_deg))
+        near_psi = float(_wrap(angle - self.axis0_deg, 180.0))
         turn = nn2_deg
         if self.whole_reads:
             psi = near_psi + np.array([0.0, 180.0])
@@ -237,7 +233,7 @@ def fit_axis(rois: list[np.ndarray], uv: np.ndarray, dphi_deg: np.ndarray,
     uv0 = uv[at_taught].mean(axis=0)
     du, dv = uv[:, 0] - uv0[0], uv[:, 1] - uv0[1]
     period = 360.0 / kappa
-    near_psi = wrap_half(axes[:, 0] - axis0)
+    near_psi = _wrap(axes[:, 0] - axis0, 180.0)
     # of the two directions along the axis, the one nearer the label's turn
     psi = np.where(np.abs(_wrap(near_psi - dphi_deg, period))
                    <= np.abs(_wrap(near_psi + 180.0 - dphi_deg, period)),
