@@ -7,7 +7,10 @@ repeat until a full look finds a step below the convergence thresholds (no move,
 reached) or the loop budget is spent. "No object" / "ambiguous" stop without moving. Every
 step passes the arm's safety layer; a rejected step stops the loop. A turn larger than the
 arm's ``max_step_deg`` (a part without symmetry may need up to 180 deg) is taken in part, and
-the next look measures the rest.
+the next look measures the rest. A full look whose turn contradicts the last full loop's (the
+reading should have dropped by the turn taken, and it did not) stops the loop without moving
+(``inconsistent``): the rotation reading no longer follows the arm, so the next step cannot be
+trusted either.
 """
 
 from __future__ import annotations
@@ -34,7 +37,12 @@ from drivers.interfaces import Arm, Camera, Frame
 logger = logging.getLogger(__name__)
 
 GroundTruth = Callable[[], tuple[float, float, float]]
-Outcome = Literal["converged", "budget", "no_object", "ambiguous", "out_of_range", "rejected"]
+Outcome = Literal["converged", "budget", "no_object", "ambiguous", "out_of_range",
+                  "inconsistent", "rejected"]
+# Outcomes that end a run early, before convergence or the loop budget: the arm is left where
+# the last accepted move put it.
+STOPPED: tuple[Outcome, ...] = ("no_object", "ambiguous", "out_of_range", "inconsistent",
+                                "rejected")
 
 
 class LookRecorder(Protocol):
@@ -62,6 +70,11 @@ class LoopConfig:
     ``settle_deg`` (the loop is settling at the taught pose) reads this many frames and takes
     their mean step (1: every look reads one frame, the paper's loop): near the pose the
     readings' frame-to-frame noise is as large as what is left to correct;
+    turn_check_deg / turn_check_share: after a full loop that turned by t on a reading of
+    r, the next full look should read about r - t (zero, unless the turn was cut to the
+    arm's ``max_step_deg``); a reading further off than the larger of ``turn_check_deg`` and
+    ``turn_check_share`` * |t| stops the loop without moving (``inconsistent``). None: no
+    check;
     save_images: save each grabbed image as PNG next to the iteration log.
     """
 
@@ -73,6 +86,8 @@ class LoopConfig:
     settle_frames: int = field(default=1, metadata={"min": 1, "max": 32})
     settle_mm: float = field(default=0.5, metadata={"min": 0.0})
     settle_deg: float = field(default=2.0, metadata={"min": 0.0})
+    turn_check_deg: float | None = field(default=10.0, metadata={"min": 0.0})
+    turn_check_share: float = field(default=0.4, metadata={"min": 0.0, "max": 1.0})
     save_images: bool = False
 
 
@@ -86,7 +101,8 @@ class LoopState:
 
 @dataclass
 class PositioningResult:
-    """outcome: converged | budget | no_object | ambiguous | out_of_range | rejected; reason
+    """outcome: converged | budget | no_object | ambiguous | out_of_range | inconsistent |
+    rejected; reason
     in words;
     loops: cumulative loop count spent; states: LoopState at the start and after every move;
     seconds_per_iteration: wall time of each look-and-move iteration."""
@@ -163,6 +179,9 @@ class PositioningLoop:
         loops, iteration = 0.0, 0
         states = [LoopState(0.0, self._error())]
         per_iteration: list[float] = []
+        # the turn the next full look should read (the last full loop's reading less the
+        # turn taken) and how far off it may be; None before the first full loop
+        expected: tuple[float, float] | None = None
 
         def finish(outcome: Outcome, reason: str) -> PositioningResult:
             logger.debug("positioning %s: %s after %.1f loops (%s)", run_id, outcome, loops,
@@ -198,10 +217,21 @@ class PositioningLoop:
                 kind, cost = "full", 1.0
                 rot = estimator.estimate_rotation(tr)
                 record.estimates.update(rot.record)
-                step = _turn_within_limits(corrective_step(tr, rot), self.arm)
-                if cfg.settle_frames > 1 and math.hypot(step.dx_mm, step.dy_mm) <= \
-                        cfg.settle_mm and abs(step.dphi_deg) <= cfg.settle_deg:
-                    step = self._settle(estimator, step, record)
+                read = corrective_step(tr, rot)
+                if expected is not None:
+                    record.estimates["turn_expected_deg"] = expected[0]
+                    if abs(read.dphi_deg - expected[0]) > expected[1]:
+                        record.commanded = read
+                        self._write(record, "stop", (t0, t1, time.perf_counter()),
+                                    frame.image)
+                        return finish("inconsistent", f"the turn read, {read.dphi_deg:.1f} "
+                                      f"deg, contradicts the last loop's (about "
+                                      f"{expected[0]:.1f} deg expected): the rotation "
+                                      "reading does not follow the arm")
+                if cfg.settle_frames > 1 and math.hypot(read.dx_mm, read.dy_mm) <= \
+                        cfg.settle_mm and abs(read.dphi_deg) <= cfg.settle_deg:
+                    read = self._settle(estimator, read, record)
+                step = _turn_within_limits(read, self.arm)
             record.commanded = step
             shift = math.hypot(step.dx_mm, step.dy_mm)
             t2 = time.perf_counter()
@@ -229,6 +259,10 @@ class PositioningLoop:
             record.loops, record.error = loops, error
             record.executed, record.clipped, record.pose_after = \
                 motion.sent, motion.clipped, motion.pose
+            if kind == "full" and cfg.turn_check_deg is not None:
+                turned = motion.sent.dphi_deg
+                expected = (read.dphi_deg - turned,
+                            max(cfg.turn_check_deg, cfg.turn_check_share * abs(turned)))
             self._write(record, kind, (t0, t1, t2, t3), frame.image)
 
     def _settle(self, estimator: Estimator, first: ToolStep,

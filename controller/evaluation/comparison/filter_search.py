@@ -40,6 +40,7 @@ from controller.evaluation.comparison.pools import Tick, open_pool
 from controller.evaluation.metrics import is_safe, state_at
 from controller.evaluation.trials import default_scene_config, run_trials
 from controller.fine_positioner import FinePositioner
+from controller.loop.positioning import STOPPED
 from controller.systems.base import TrainedModel
 from controller.systems.gabor import GaborSystem
 from controller.teach.acquisition import acquire, transfer
@@ -228,8 +229,7 @@ def evaluate_set(job: _SetJob, tick: Tick) -> SetRun:
                          on_trial=tick)
     finals = [state_at(t, SEARCH_BUDGET).error for t in run["states"]]
     rms = np.sqrt(np.mean(np.square(np.array(finals, dtype=float)), axis=0))
-    failures = sum(o in ("no_object", "ambiguous", "out_of_range", "rejected")
-                   for o in run["outcomes"])
+    failures = sum(o in STOPPED for o in run["outcomes"])
     return SetRun(job.name, job.data.repeat, job.data.seed, model.feature_count,
                   model.train_seconds, open_loop, tuple(float(v) for v in rms),
                   float(np.mean([is_safe(e) for e in finals])), failures)

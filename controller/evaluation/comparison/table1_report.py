@@ -18,11 +18,11 @@ import numpy as np
 from controller.evaluation.comparison.table1 import Table1Result
 from controller.evaluation.metrics import SAFE_DEG, SAFE_MM, is_safe, state_at
 from controller.evaluation.plots import plot_convergence
+from controller.loop.positioning import STOPPED
 from drivers.core.files import atomic_write_text
 
 TABLE_BUDGETS = (1.5, 2.5, 5.0, 6.5)  # loops: every budget the paper's Table 1 quotes, <= 6.5
 VERDICT_BUDGET = 2.5
-STOPPED = ("no_object", "ambiguous", "out_of_range", "rejected")  # outcomes that stop a run early
 
 PAPER_TABLE1 = """\
 | system | good light | poor light | rotation features | training |
@@ -84,9 +84,9 @@ def _accuracy(result: Table1Result) -> list[str]:
 
 def _failures(result: Table1Result) -> list[str]:
     lines = ["| system | light | converged | budget spent | no object | ambiguous | "
-             "out of range | rejected | converged off target | failure rate | no-object rate "
-             "| grasp success |",
-             "|---|---|---|---|---|---|---|---|---|---|---|---|"]
+             "out of range | inconsistent | rejected | converged off target | failure rate | "
+             "no-object rate | grasp success |",
+             "|---|---|---|---|---|---|---|---|---|---|---|---|---|"]
     for r in result.reports:
         key = (r["system"], r["lighting"])
         o = r["outcomes"]

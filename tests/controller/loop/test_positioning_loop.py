@@ -198,3 +198,58 @@ def test_only_settling_looks_read_more_frames(tmp_path):
     # 3 mm / 10 deg, then 0.3 mm / 1 deg: one frame, then four; then the check settles too
     assert "settle" not in records[0] and len(records[1]["settle"]) == 4
     assert est.frames == 1 + 4 * (len(records) - 1)
+
+
+class BlindNearEstimator(TruthEstimator):
+    """Reads the turn right far from the taught heading and ``bias`` deg off within ``near``
+    deg of it (a part half hidden: the rest of its outline fits another heading)."""
+
+    def __init__(self, arm, bias: float, near: float = 10.0, **kw) -> None:
+        super().__init__(arm, **kw)
+        self.bias, self.near = bias, near
+
+    def estimate_rotation(self, translation):
+        r = super().estimate_rotation(translation)
+        if abs(r.dphi_deg) < self.near:
+            return dataclasses.replace(r, dphi_deg=r.dphi_deg + self.bias)
+        return r
+
+
+def test_a_turn_reading_that_contradicts_the_last_turn_stops_the_loop(tmp_path):
+    arm, cam, cfg = make(ToolStep(1.0, 0.0, 0.0, 30.0))
+    with IterationLog(tmp_path / "it.jsonl") as log:
+        result = PositioningLoop(arm, cam, cfg, log, lambda: truth_error(arm)).run(
+            BlindNearEstimator(arm, bias=-20.0))
+    assert result.outcome == "inconsistent" and "-20.0 deg" in result.reason
+    # the first full loop turned right; the second reading was not taken
+    assert len(arm.moves) == 1 and result.loops == 1.0
+    assert result.states[-1].error == pytest.approx((0.0, 0.0, 0.0), abs=1e-6)
+    first, stop = read_log(tmp_path / "it.jsonl")
+    assert stop["loop_kind"] == "stop" and stop["executed"] is None
+    assert stop["turn_expected_deg"] == pytest.approx(0.0, abs=1e-9)
+    assert stop["commanded"]["dphi_deg"] == pytest.approx(-20.0, abs=1e-6)
+
+
+def test_the_turn_check_allows_a_share_of_the_turn_and_can_be_off():
+    # a cautious rotation reading (gain 0.7) leaves 30% of each turn for the next look:
+    # within the 40% share, so the loop converges
+    arm, cam, cfg = make(ToolStep(1.0, 0.0, 0.0, 40.0), max_loops=12.0)
+    assert PositioningLoop(arm, cam, cfg).run(TruthEstimator(arm, gain=0.7)).outcome == \
+        "converged"
+    # small misreadings near the pose stay within the 10 deg floor
+    arm, cam, cfg = make(ToolStep(1.0, 0.0, 0.0, 30.0), max_loops=3.0)
+    assert PositioningLoop(arm, cam, cfg).run(
+        BlindNearEstimator(arm, bias=8.0, near=1.0)).outcome == "budget"
+    # without the check the loop follows the misreading
+    arm, cam, cfg = make(ToolStep(1.0, 0.0, 0.0, 30.0), max_loops=3.0, turn_check_deg=None)
+    result = PositioningLoop(arm, cam, cfg, ground_truth=lambda: truth_error(arm)).run(
+        BlindNearEstimator(arm, bias=-20.0))
+    assert result.outcome == "budget" and len(arm.moves) == 3
+
+
+def test_the_turn_check_expects_the_rest_of_a_turn_taken_in_part():
+    # 170 deg with a 100 deg turn limit: the next look reads the remaining 70 deg, as expected
+    limits = SafetyLimits(max_step_deg=100.0, on_violation="reject")
+    arm, cam, cfg = make(ToolStep(1.0, -1.0, 0.0, 170.0), limits=limits)
+    assert PositioningLoop(arm, cam, cfg).run(TruthEstimator(arm, kappa=1)).outcome == \
+        "converged"
