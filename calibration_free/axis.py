@@ -29,6 +29,7 @@ from typing import Any
 import cv2
 import numpy as np
 
+from calibration_free.ends import EndMap
 from calibration_free.errors import BundleError
 
 logger = logging.getLogger(__name__)
@@ -109,6 +110,9 @@ class AxisMap:
         agree_deg: a reading further than this from NN2's is not taken.
         whole_rms_deg, near_rms_deg: each map's RMS error on the samples it was fitted on.
         samples: how many samples the whole-circle map was fitted on.
+        ends: for a bar (kappa 2), the map from either end to its centre, for a bar one of
+            whose ends is hidden (``calibration_free.ends``); None: none (a screw, too few
+            images near the taught pose, or a model file before version 7).
     """
 
     kappa: int
@@ -124,6 +128,13 @@ class AxisMap:
     whole_rms_deg: float = 0.0
     near_rms_deg: float = 0.0
     samples: int = 0
+    ends: EndMap | None = None
+
+    @property
+    def direction(self) -> tuple[float, float]:
+        """The axis at the taught pose as a unit vector in the image (u, v)."""
+        a = math.radians(self.axis0_deg)
+        return math.cos(a), math.sin(a)
 
     def __post_init__(self) -> None:
         numbers = (self.axis0_deg, self.elongation, *self.uv0_px, *self.whole, *self.near,
@@ -147,6 +158,8 @@ class AxisMap:
                 and self.window_deg > 0.0 and self.agree_deg > 0.0):
             raise BundleError("axis: needs elongation >= 1, 0 < near_range_deg <= 90, "
                               "window_deg and agree_deg > 0")
+        if self.ends is not None and not isinstance(self.ends, EndMap):
+            raise BundleError("axis: ends must be an end map")
 
     def reading(self, roi: np.ndarray, u_px: float, v_px: float, nn2_deg: float
                 ) -> float | None:
@@ -184,11 +197,13 @@ class AxisMap:
                 "near_range_deg": self.near_range_deg, "whole_reads": self.whole_reads,
                 "window_deg": self.window_deg,
                 "agree_deg": self.agree_deg, "whole_rms_deg": self.whole_rms_deg,
-                "near_rms_deg": self.near_rms_deg, "samples": self.samples}
+                "near_rms_deg": self.near_rms_deg, "samples": self.samples,
+                "ends": None if self.ends is None else self.ends.to_info()}
 
     @classmethod
     def from_info(cls, info: Any) -> AxisMap:
-        """The map from the model file's JSON.
+        """The map from the model file's JSON (``ends`` may be missing: a file before
+        version 7).
 
         Raises:
             BundleError: not a mapping with the fields ``to_info`` writes.
@@ -196,12 +211,14 @@ class AxisMap:
         keys = ("kappa", "axis0_deg", "elongation", "uv0_px", "whole", "near",
                 "near_range_deg", "whole_reads", "window_deg", "agree_deg", "whole_rms_deg",
                 "near_rms_deg", "samples")
-        if not isinstance(info, dict) or sorted(info) != sorted(keys):
-            raise BundleError(f"axis: needs the keys {', '.join(keys)}")
+        if not isinstance(info, dict) or sorted(set(info) - {"ends"}) != sorted(keys):
+            raise BundleError(f"axis: needs the keys {', '.join(keys)} (and ends)")
         try:
             return cls(**{**info, "uv0_px": tuple(info["uv0_px"]),
                           "whole": tuple(info["whole"]), "near": tuple(info["near"]),
-                          "samples": int(info["samples"])})
+                          "samples": int(info["samples"]),
+                          "ends": (None if info.get("ends") is None
+                                   else EndMap.from_info(info["ends"]))})
         except (TypeError, ValueError) as exc:
             raise BundleError(f"axis: {exc}") from None
 

@@ -17,6 +17,7 @@ import numpy as np
 
 from calibration_free import angles
 from calibration_free.bundle import ModelBundle
+from calibration_free.ends import hidden_end_shift
 from calibration_free.gabor import GaborBank
 from calibration_free.localise import Localisation
 
@@ -44,6 +45,11 @@ class Percept:
         axis_deg: the long axis' reading (``bundle.axis``: an elongated part), or None
             (no axis map, no clear axis, or one that disagrees with NN2); ``dphi_deg`` is
             this one where there is one, else NN2's, and ``nn1_rot`` sees the one taken.
+        hidden_px: for a bar (kappa 2) with one end hidden, the length hidden (px)
+            (``calibration_free.ends``); None: the whole bar is seen, or no correction.
+        centre_px: the part's centre the translation nets read: the localisation's, or for
+            a bar with one end hidden where the end seen puts it (the features still look
+            at the ROI around the blob seen).
     """
 
     localisation: Localisation
@@ -58,6 +64,8 @@ class Percept:
     near: bool = False
     nn2_deg: float | None = None
     axis_deg: float | None = None
+    hidden_px: float | None = None
+    centre_px: tuple[float, float] | None = None
 
     @property
     def ok(self) -> bool:
@@ -85,6 +93,8 @@ class Perception:
         self._front = bundle.front
         self._bank = GaborBank(bundle.gabor)
         self._roi_px = bundle.gabor.roi_px
+        # a bar (both ends alike): where one end is hidden, the other says where its centre is
+        self._ends = bundle.axis.ends if bundle.axis is not None else None
 
     def locate(self, image: np.ndarray) -> tuple[np.ndarray, Localisation]:
         """The preprocessed image (``FrontEnd.preprocess``) and the object's localisation in it.
@@ -114,11 +124,18 @@ class Perception:
         if loc.status != "ok":
             timings["total"] = (t2 - t0) / 1e3
             return Percept(loc, None, None, None, None, timings)
-        dx, dy = self.bundle.nn1(np.array((loc.u_px, loc.v_px)))
+        hidden_px, centre = None, (loc.u_px, loc.v_px)
+        if self._ends is not None:
+            shift = hidden_end_shift(normalised, loc.part_mask, loc.u_px, loc.v_px,
+                                     self._ends, self._front.threshold)
+            if shift is not None:
+                du, dv, hidden_px = shift
+                centre = (loc.u_px + du, loc.v_px + dv)
+        dx, dy = self.bundle.nn1(np.array(centre))
         t3 = clock()
         timings.update(nn1=(t3 - t2) / 1e3, total=(t3 - t0) / 1e3)
         return Percept(loc, (float(dx), float(dy)), None, None, None, timings,
-                       normalised=normalised)
+                       normalised=normalised, hidden_px=hidden_px, centre_px=centre)
 
     def rotation(self, percept: Percept) -> Percept:
         """Go on from a ``translation`` percept of the same frame: ROI -> Gabor features ->
@@ -145,11 +162,11 @@ class Perception:
         sc = (float(s) / norm, float(c) / norm)
         axis_deg = None
         if self.bundle.axis is not None:
-            axis_deg = self.bundle.axis.reading(roi, loc.u_px, loc.v_px, nn2_deg)
+            axis_deg = self.bundle.axis.reading(roi, *percept.centre_px, nn2_deg)
             if axis_deg is not None:
                 dphi = axis_deg
                 sc = tuple(float(v) for v in angles.encode(dphi, self.bundle.kappa))
-        inputs = np.array((loc.u_px, loc.v_px, *sc))
+        inputs = np.array((*percept.centre_px, *sc))
         dx_rot, dy_rot = self.bundle.nn1_rot(inputs)
         rot_mm = (float(dx_rot), float(dy_rot))
         near = math.hypot(*rot_mm) <= self.bundle.near_mm
@@ -162,7 +179,8 @@ class Perception:
         timings.update(roi=(t4 - t3) / 1e3, features=(t5 - t4) / 1e3, nn2=(t6 - t5) / 1e3,
                        total=timings["total"] + (t6 - t3) / 1e3)
         return Percept(loc, percept.nn1_mm, features, (float(s), float(c)), dphi, timings,
-                       full_mm, percept.normalised, rot_mm, near, nn2_deg, axis_deg)
+                       full_mm, percept.normalised, rot_mm, near, nn2_deg, axis_deg,
+                       percept.hidden_px, percept.centre_px)
 
     def perceive(self, image: np.ndarray) -> Percept:
         """The whole path in one pass: corrective translation (NN1) and rotation (NN2).

@@ -25,6 +25,7 @@ from calibration_free import angles
 from calibration_free.axis import fit_axis
 from calibration_free.bundle import ModelBundle
 from calibration_free.dataset import Dataset
+from calibration_free.ends import fit_ends
 from calibration_free.errors import TrainingError
 from calibration_free.front_end import FEATURE_CEILING, FEATURE_FLOOR, FrontEnd, learn_chroma
 from calibration_free.gabor import GaborBank, GaborConfig
@@ -455,8 +456,15 @@ def train_bundle(nn1_data: Dataset, nn2_data: Dataset, *, object_kind: str, kapp
     nn2 = train_nn2(rois, nn2_labels[:, 2], kappa, gabor, seed=seed,
                     hidden=nn2_hidden, epochs=nn2_epochs, weight_decay=nn2_weight_decay)
     # An elongated part's long axis reads the turn near the taught pose (calibration_free.axis)
-    axis = (fit_axis(rois, prep.centres("nn2"), nn2_labels[:, 2], at_taught_pose(nn2_labels),
-                     kappa) if fine_axis else None)
+    at_taught = at_taught_pose(nn2_labels)
+    axis = (fit_axis(rois, prep.centres("nn2"), nn2_labels[:, 2], at_taught, kappa)
+            if fine_axis else None)
+    if axis is not None and kappa == 2:  # a bar with a hidden end (calibration_free.ends)
+        usable = prep.usable["nn2"]
+        ends = fit_ends([prep.normalised["nn2"][i] for i in usable],
+                        [prep.found["nn2"][i].part_mask for i in usable],
+                        prep.centres("nn2"), at_taught, axis.direction, prep.front.threshold)
+        axis = dataclasses.replace(axis, ends=ends)
 
     training = {
         "seed": seed,
@@ -472,7 +480,8 @@ def train_bundle(nn1_data: Dataset, nn2_data: Dataset, *, object_kind: str, kapp
                                                   if nn2_weight_decay is None
                                                   else nn2_weight_decay)},
         "axis": ({"samples": axis.samples, "whole_rms_deg": axis.whole_rms_deg,
-                  "near_rms_deg": axis.near_rms_deg, "elongation": axis.elongation}
+                  "near_rms_deg": axis.near_rms_deg, "elongation": axis.elongation,
+                  "ends_rms_px": None if axis.ends is None else list(axis.ends.rms_px)}
                  if axis is not None else None),
         "seconds": time.perf_counter() - start,
         "created_utc": time.strftime("%Y-%m-%dT%H:%M:%SZ", time.gmtime()),

@@ -10,6 +10,7 @@ import pytest
 
 from calibration_free.axis import AxisMap
 from calibration_free.bundle import FORMAT_VERSION, KIND, ModelBundle
+from calibration_free.ends import EndMap
 from calibration_free.errors import BundleError
 from calibration_free.gabor import GaborConfig
 from calibration_free.model_file import pack_model
@@ -231,3 +232,25 @@ def test_a_version_5_file_has_no_axis_map(bundle, tmp_path):
     path.write_bytes(pack(info, tensors, version=5))
     old = ModelBundle.load(path, expect_object="screw")
     assert old.axis is None and old.format_version == 5
+
+
+def test_a_bars_end_map_round_trips_and_a_version_6_file_has_none(bundle, tmp_path):
+    ends = EndMap(direction=(0.0, -1.0), low=tuple(np.arange(10) / 10.0),
+                  high=tuple(-np.arange(10) / 10.0), length_px=73.4, rms_px=(0.3, 0.4))
+    ledge = dataclasses.replace(
+        bundle, object_kind="ledge", kappa=2,
+        axis=dataclasses.replace(an_axis_map(), kappa=2, ends=ends))
+    path = tmp_path / "ledge.bundle"
+    ledge.save(path)
+    again = ModelBundle.load(path, expect_object="ledge")
+    assert again.axis.ends == ends
+    info, tensors = info_and_tensors(ledge)
+    info["axis"] = {**info["axis"], "ends": {**info["axis"]["ends"], "low": [1.0, 2.0]}}
+    path.write_bytes(pack(info, tensors))
+    with pytest.raises(BundleError, match="axis.ends: needs a unit direction, 10 coefficients"):
+        ModelBundle.load(path)
+    info, tensors = info_and_tensors(ledge)
+    del info["axis"]["ends"]
+    path.write_bytes(pack(info, tensors, version=6))
+    old = ModelBundle.load(path, expect_object="ledge")
+    assert old.format_version == 6 and old.axis is not None and old.axis.ends is None
