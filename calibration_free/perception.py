@@ -32,8 +32,8 @@ class Percept:
         features: the Gabor features (float32); None unless ok and rotation was asked for.
         nn2_sc: NN2's raw (sin, cos) of kappa dphi; None like ``features``.
         dphi_deg: the corrective rotation decoded from nn2_sc; None like ``features``.
-        timings_us: microseconds per stage (preprocess, localise, roi, features, nn1, nn2,
-            total); stages not run are absent.
+        timings_us: microseconds per stage (preprocess, localise, ends (a bar's hidden end),
+            roi, features, nn1, nn2, total); stages not run are absent.
         full_mm: the translation from (u, v) and NN2's rotation: ``nn1_rot``'s reading, with
             the bundle's ``nn1_near`` correction added where it reads at most the bundle's
             ``near_mm``; None like ``features``.
@@ -131,6 +131,9 @@ class Perception:
             if shift is not None:
                 du, dv, hidden_px = shift
                 centre = (loc.u_px + du, loc.v_px + dv)
+            t_ends = clock()
+            timings["ends"] = (t_ends - t2) / 1e3
+            t2 = t_ends
         dx, dy = self.bundle.nn1(np.array(centre))
         t3 = clock()
         timings.update(nn1=(t3 - t2) / 1e3, total=(t3 - t0) / 1e3)
