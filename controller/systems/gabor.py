@@ -61,16 +61,16 @@ class GaborEstimator:
 
 def _translation_readings(p: Percept) -> dict[str, Any]:
     """The rotation-aware nets' readings for the iteration record: ``nn1_rot``'s, the
-    translation with the near net's correction when it was added, and NN2's and the long
-    axis' rotation readings when the axis read one (``nn2_deg``, ``axis_deg``), and the
+    translation with the near net's correction when it was added, NN2's rotation reading (``nn2_deg``), the long axis' where it read one (``axis_deg``), and the
     length of a bar found hidden at one end (``hidden_px``; its centre was moved back)."""
     readings: dict[str, Any] = {"nn1_rot": list(p.rot_mm)}
     if p.hidden_px is not None:
         readings["hidden_px"] = p.hidden_px
     if p.near:
         readings["nn1_near"] = list(p.full_mm)
-    if p.axis_deg is not None:
+    if p.nn2_deg is not None:
         readings["nn2_deg"] = p.nn2_deg
+    if p.axis_deg is not None:
         readings["axis_deg"] = p.axis_deg
     return readings
 
