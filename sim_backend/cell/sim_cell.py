@@ -277,12 +277,14 @@ class SimCell:
 
     def _build_occluder(self) -> _Item:
         """A flat card lying on the part, covering ``coverage`` of its length along the part's
-        x axis, from a side picked by the seed; as wide as the part's grasp, so the jaws pass."""
+        x axis from the end on a side picked by the seed (a screw: its head or its tip); as
+        wide as the part's grasp, so the jaws pass."""
         cid = self._client
         coverage = self.scene.occluder.coverage
-        extent = float(np.abs(self.part.mesh.vertices_mm[:, 0]).max())
+        x = self.part.mesh.vertices_mm[:, 0]
         side = 1.0 if self._occluder_rng.random() < 0.5 else -1.0
-        inner_edge = side * (extent - 2.0 * extent * coverage)
+        end = float(x.max() if side > 0.0 else x.min())
+        inner_edge = end - side * coverage * float(x.max() - x.min())
         centre_x = inner_edge + side * OCCLUDER_LENGTH_MM / 2.0
         half = np.array([OCCLUDER_LENGTH_MM / 2.0, self.part.grasp_width_mm / 2.0,
                          OCCLUDER_THICKNESS_MM / 2.0])

@@ -21,6 +21,7 @@ from sim_backend.cell.sim_cell import (
     LABEL_OCCLUDER,
     LABEL_PART,
     LABEL_ROBOT,
+    OCCLUDER_LENGTH_MM,
     TOOL_IN_FLANGE,
     SimCell,
 )
@@ -252,6 +253,22 @@ def test_occluder_hides_the_given_share_of_the_part():
             visible[coverage] = int((labels == LABEL_PART).sum())
             assert (labels == LABEL_OCCLUDER).sum() > 0
     assert visible[0.0] > visible[0.3] > visible[0.6] > 0
+
+
+def test_occluder_covers_its_share_of_the_length_from_either_end_of_a_screw():
+    """The card hides ``coverage`` of the part's length from the end the seed picks: a screw's
+    head or its tip, not a longer stretch on the side of the head (the longer half)."""
+    covered = {}
+    for seed in range(8):
+        with SimCell(_scene(object={"kind": "screw"},
+                            occluder={"enabled": True, "coverage": 0.25}), seed=seed) as c:
+            x = c.part.mesh.vertices_mm[:, 0]
+            card = c._occluder.relative[0, 3]  # the card's centre along the part's x
+            half = OCCLUDER_LENGTH_MM / 2.0
+            hidden = x.max() - (card - half) if card > 0 else (card + half) - x.min()
+            covered[card > 0] = hidden / (x.max() - x.min())
+    assert set(covered) == {True, False}  # both ends among the seeds
+    assert covered[True] == pytest.approx(0.25) and covered[False] == pytest.approx(0.25)
 
 
 def test_clutter_lies_around_clear_of_the_part_and_the_gripper():
