@@ -82,7 +82,8 @@ class LightingConfig:
 
 @dataclass(frozen=True)
 class OccluderConfig:
-    """A flat piece lying on the part, hiding ``coverage`` (0..1) of it from above."""
+    """A flat card lying on the part over one end (the seed picks which), hiding ``coverage``
+    (0..1) of the part's length as the hand camera sees it from the pre-grasp pose."""
 
     enabled: bool = False
     coverage: float = field(default=0.0, metadata={"min": 0.0, "max": 0.9})

@@ -276,12 +276,16 @@ class SimCell:
         return body
 
     def _build_occluder(self) -> _Item:
-        """A flat card lying on the part, covering ``coverage`` of its length along the part's
-        x axis from the end on a side picked by the seed (a screw: its head or its tip); as
-        wide as the part's grasp, so the jaws pass."""
+        """A flat card lying on the part, hiding ``coverage`` of its length along the part's
+        x axis as the hand camera sees it from the pre-grasp pose, from the end on a side
+        picked by the seed (a screw: its head or its tip); as wide as the part's grasp, so
+        the jaws pass. The camera looks from an angle: measured on the table's plane a card
+        over the far end would hide almost nothing and one over the near end most of the
+        part, so the share is taken in the camera's view."""
         cid = self._client
         coverage = self.scene.occluder.coverage
-        x = self.part.mesh.vertices_mm[:, 0]
+        z = self.part.height_mm + OCCLUDER_THICKNESS_MM / 2.0 + 0.2
+        x = self._seen_along_x(z)
         side = 1.0 if self._occluder_rng.random() < 0.5 else -1.0
         end = float(x.max() if side > 0.0 else x.min())
         inner_edge = end - side * coverage * float(x.max() - x.min())
@@ -293,8 +297,17 @@ class SimCell:
         collision = p.createCollisionShape(p.GEOM_BOX, halfExtents=(half / 1000.0).tolist(),
                                            physicsClientId=cid)
         body = p.createMultiBody(0.0, collision, visual, physicsClientId=cid)
-        z = self.part.height_mm + OCCLUDER_THICKNESS_MM / 2.0 + 0.2
         return _Item(body, _translation(centre_x, 0.0, z), LABEL_OCCLUDER)
+
+    def _seen_along_x(self, z_mm: float) -> np.ndarray:
+        """Where the hand camera, at the pre-grasp pose, sees each vertex of the part on the
+        plane ``z_mm`` above the table: x (mm) in the part's nominal grasp frame."""
+        tool = _translation(0.0, 0.0, self.part.height_mm + APPROACH_HEIGHT_MM)
+        tool[:3, :3] = tool_down_rotation(0.0)
+        camera = (tool @ hand_camera.camera_in_tool(self.scene.camera.mount))[:3, 3]
+        vertices = self.part.mesh.vertices_mm
+        t = (z_mm - camera[2]) / (vertices[:, 2] - camera[2])
+        return camera[0] + t * (vertices[:, 0] - camera[0])
 
     def _clutter_layout(self, count: int) -> list[tuple[str, tuple, np.ndarray]]:
         """Kinds, colours and poses (relative to the part's nominal grasp frame, z up) of
