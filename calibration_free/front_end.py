@@ -75,6 +75,10 @@ class FrontEnd:
         feature_ceiling: in the saturation channel, the features see the ROI up to this
             multiple of ``threshold`` (everything above it reads the same); 0: no ceiling
             (model files written before it).
+        taught_area_px: the part's blob area at the taught pose (the mean over the training
+            frames taken there): where the loop settles, a blob much smaller than this is a
+            part partly hidden (``seen_share``). None: not known (model files written before
+            it).
     """
 
     frame_height_px: int
@@ -91,8 +95,14 @@ class FrontEnd:
     chroma_tolerance: float = 0.0
     feature_floor: float = 0.0
     feature_ceiling: float = 0.0
+    taught_area_px: float | None = None
 
     def __post_init__(self) -> None:
+        taught = self.taught_area_px
+        if taught is not None and (isinstance(taught, bool) or not isinstance(
+                taught, (int, float)) or not 0.0 < taught < math.inf):
+            raise ConfigError(f"front end: taught_area_px must be a number > 0 or none, got "
+                              f"{taught!r}")
         if isinstance(self.feature_floor, bool) or not isinstance(
                 self.feature_floor, (int, float)) or not 0.0 <= self.feature_floor <= 1.0:
             raise ConfigError(f"front end: feature_floor must be a number in 0..1, got "
@@ -235,6 +245,12 @@ class FrontEnd:
         preprocessed = self.preprocess(image)
         return preprocessed, self.localise(preprocessed, image)
 
+    def seen_share(self, area_px: float) -> float | None:
+        """A blob's area over the part's at the taught pose (None where that is not known):
+        near 1 where the loop settles on the whole part, lower where something hides part of
+        it."""
+        return None if self.taught_area_px is None else area_px / self.taught_area_px
+
     def to_info(self) -> dict[str, Any]:
         """The JSON a model file stores: keys ``frame_px``, ``intensity``, ``localisation``.
 
@@ -253,13 +269,14 @@ class FrontEnd:
                                  "chroma": chroma,
                                  "chroma_tolerance": self.chroma_tolerance,
                                  "feature_floor": self.feature_floor,
-                                 "feature_ceiling": self.feature_ceiling}}
+                                 "feature_ceiling": self.feature_ceiling,
+                                 "taught_area_px": self.taught_area_px}}
 
     @classmethod
     def from_info(cls, info: Mapping[str, Any]) -> FrontEnd:
         """Inverse of ``to_info``. ``localisation.channel``, ``nominal_uv_px``, ``chroma``,
-        ``feature_floor`` and ``feature_ceiling`` may be absent (model files written before
-        they were stored): "max", None, None, 0 and 0.
+        ``feature_floor``, ``feature_ceiling`` and ``taught_area_px`` may be absent (model
+        files written before they were stored): "max", None, None, 0, 0 and None.
 
         Args:
             info: a model file's JSON (at least ``frame_px``, ``intensity``,
@@ -272,6 +289,7 @@ class FrontEnd:
         loc = info["localisation"]
         uv = loc.get("nominal_uv_px")
         chroma = loc.get("chroma")
+        taught = loc.get("taught_area_px")
         return cls(int(info["frame_px"]["height"]), int(info["frame_px"]["width"]),
                    IntensityStats(**info["intensity"]), float(loc["threshold"]),
                    loc["polarity"], float(loc["expected_area_px"]),
@@ -280,7 +298,8 @@ class FrontEnd:
                    None if chroma is None else tuple(chroma),
                    float(loc.get("chroma_tolerance", 0.0)),
                    float(loc.get("feature_floor", 0.0)),
-                   float(loc.get("feature_ceiling", 0.0)))
+                   float(loc.get("feature_ceiling", 0.0)),
+                   None if taught is None else float(taught))
 
 
 # The colour preference's tolerance: this many times the largest chromaticity distance seen among

@@ -38,11 +38,11 @@ logger = logging.getLogger(__name__)
 
 GroundTruth = Callable[[], tuple[float, float, float]]
 Outcome = Literal["converged", "budget", "no_object", "ambiguous", "out_of_range",
-                  "inconsistent", "rejected"]
+                  "inconsistent", "occluded", "rejected"]
 # Outcomes that end a run early, before convergence or the loop budget: the arm is left where
 # the last accepted move put it.
 STOPPED: tuple[Outcome, ...] = ("no_object", "ambiguous", "out_of_range", "inconsistent",
-                                "rejected")
+                                "occluded", "rejected")
 
 
 class LookRecorder(Protocol):
@@ -75,6 +75,12 @@ class LoopConfig:
     arm's ``max_step_deg``); a reading further off than the larger of ``turn_check_deg`` and
     ``turn_check_share`` * |t| stops the loop without moving (``inconsistent``). None: no
     check;
+    hidden_check_share: where the loop would end near the taught pose (converged, or the
+    budget spent with a translation read within ``r_fine_mm``), a part seen smaller than at
+    the taught pose by more than this share of its area is partly hidden (a card, another
+    part lying on it), and the pose read from what is seen is off: the loop ends as
+    ``occluded`` (no grasp follows). None: no check (nor for a system or model file that
+    does not know the taught area);
     save_images: save each grabbed image as PNG next to the iteration log.
     """
 
@@ -88,6 +94,7 @@ class LoopConfig:
     settle_deg: float = field(default=2.0, metadata={"min": 0.0})
     turn_check_deg: float | None = field(default=10.0, metadata={"min": 0.0})
     turn_check_share: float = field(default=0.4, metadata={"min": 0.0, "max": 1.0})
+    hidden_check_share: float | None = field(default=0.1, metadata={"min": 0.0, "max": 1.0})
     save_images: bool = False
 
 
@@ -102,7 +109,7 @@ class LoopState:
 @dataclass
 class PositioningResult:
     """outcome: converged | budget | no_object | ambiguous | out_of_range | inconsistent |
-    rejected; reason
+    occluded | rejected; reason
     in words;
     loops: cumulative loop count spent; states: LoopState at the start and after every move;
     seconds_per_iteration: wall time of each look-and-move iteration."""
@@ -235,13 +242,20 @@ class PositioningLoop:
             record.commanded = step
             shift = math.hypot(step.dx_mm, step.dy_mm)
             t2 = time.perf_counter()
-            if kind == "full" and shift <= cfg.converge_mm and \
-                    abs(step.dphi_deg) <= cfg.converge_deg:
+            converged = kind == "full" and shift <= cfg.converge_mm and \
+                abs(step.dphi_deg) <= cfg.converge_deg
+            spent = not converged and loops + cost > budget + 1e-9
+            if (converged or spent) and self._hidden(tr, read_mm):
+                self._write(record, "stop", (t0, t1, t2), frame.image)
+                return finish("occluded", f"the part shows {tr.seen_share:.0%} of its area at "
+                                          "the taught pose: something hides part of it, so "
+                                          "the pose read from what is seen is off")
+            if converged:
                 self._write(record, "check", (t0, t1, t2), frame.image)
                 return finish("converged", f"step {shift:.3f} mm / "
                                            f"{step.dphi_deg:.2f} deg below the convergence "
                                            "thresholds")
-            if loops + cost > budget + 1e-9:
+            if spent:
                 self._write(record, "stop", (t0, t1, t2), frame.image)
                 return finish("budget", f"loop budget {budget:g} spent")
             try:
@@ -264,6 +278,14 @@ class PositioningLoop:
                 expected = (read.dphi_deg - turned,
                             max(cfg.turn_check_deg, cfg.turn_check_share * abs(turned)))
             self._write(record, kind, (t0, t1, t2, t3), frame.image)
+
+    def _hidden(self, tr: TranslationEstimate, read_mm: float) -> bool:
+        """Whether a look where the loop ends shows the part partly hidden: near the taught
+        pose (the translation read within r_fine) its blob is smaller than there by more
+        than ``hidden_check_share``."""
+        share = self.config.hidden_check_share
+        return share is not None and tr.seen_share is not None \
+            and read_mm <= self.config.r_fine_mm and tr.seen_share < 1.0 - share
 
     def _settle(self, estimator: Estimator, first: ToolStep,
                 record: IterationRecord) -> ToolStep:

@@ -34,10 +34,11 @@ class AlignEstimator(ModelEstimator):
             return TranslationEstimate(loc.status, reason=loc.reason,
                                        record={"area_px": loc.area_px}, percept=p)
         reg = p.registration
+        share = self.model.front.seen_share(loc.area_px)
         return TranslationEstimate("ok", p.step[0], p.step[1], loc.u_px, loc.v_px, record={
-            "area_px": loc.area_px, "registered_px": [reg.u_px, reg.v_px],
+            "area_px": loc.area_px, "seen_share": share, "registered_px": [reg.u_px, reg.v_px],
             "turn_deg": reg.angle_deg, "correlation": reg.correlation, "refined": reg.refined,
-            "scan_deg": reg.scan_deg}, percept=p)
+            "scan_deg": reg.scan_deg}, percept=p, seen_share=share)
 
     def estimate_rotation(self, translation: TranslationEstimate) -> RotationEstimate:
         """The registration's turn through the fit; see ``Estimator.estimate_rotation``."""

@@ -32,6 +32,9 @@ class TranslationEstimate:
         record: values for the iteration log (network outputs, blob area, timings...).
         percept: the system's own perception of the frame, for ``estimate_rotation`` (opaque
             to the loop).
+        seen_share: the part's blob area over its area at the taught pose
+            (``FrontEnd.seen_share``); None where the system does not know it, or has
+            accounted for a hidden part itself (a bar read from the end it shows).
     """
 
     status: Status
@@ -42,6 +45,7 @@ class TranslationEstimate:
     reason: str = ""
     record: dict[str, Any] = field(default_factory=dict)
     percept: Any = field(default=None, repr=False, compare=False)
+    seen_share: float | None = None
 
 
 @dataclass(frozen=True)

@@ -36,17 +36,24 @@ class GaborEstimator:
         reading at most the bundle's ``near_mm``) the near net's correction is added
         (``nn1_near``). The 36 features and NN2 cost a few tens of microseconds a frame. The
         record keeps the readings: ``nn1_rot``, ``nn1_near`` (the corrected translation
-        returned, when the correction was added) and NN1's own (``nn1``).
+        returned, when the correction was added) and NN1's own (``nn1``), and the blob's
+        area over the part's at the taught pose (``seen_share``; None for a bar read from
+        the end it shows).
         """
         p = self.perception.perceive(image)
         loc = p.localisation
         if not p.ok:
             return TranslationEstimate(loc.status, reason=loc.reason,
                                        record={"area_px": loc.area_px}, percept=p)
+        # a bar read from the end it shows has its hidden part accounted for
+        share = (None if p.hidden_px is not None
+                 else self.perception.bundle.front.seen_share(loc.area_px))
         return TranslationEstimate("ok", p.full_mm[0], p.full_mm[1], loc.u_px, loc.v_px,
-                                   record={"area_px": loc.area_px, "nn1": list(p.nn1_mm),
+                                   record={"area_px": loc.area_px, "seen_share": share,
+                                           "nn1": list(p.nn1_mm),
                                            **_translation_readings(p),
-                                           "perception_us": p.timings_us}, percept=p)
+                                           "perception_us": p.timings_us}, percept=p,
+                                   seen_share=share)
 
     def estimate_rotation(self, translation: TranslationEstimate) -> RotationEstimate:
         """ROI, Gabor features, NN2 and the rotation-aware translation (already perceived
@@ -61,8 +68,9 @@ class GaborEstimator:
 
 def _translation_readings(p: Percept) -> dict[str, Any]:
     """The rotation-aware nets' readings for the iteration record: ``nn1_rot``'s, the
-    translation with the near net's correction when it was added, NN2's rotation reading (``nn2_deg``), the long axis' where it read one (``axis_deg``), and the
-    length of a bar found hidden at one end (``hidden_px``; its centre was moved back)."""
+    translation with the near net's correction when it was added, NN2's rotation reading
+    (``nn2_deg``), the long axis' where it read one (``axis_deg``), and the length of a bar
+    found hidden at one end (``hidden_px``; its centre was moved back)."""
     readings: dict[str, Any] = {"nn1_rot": list(p.rot_mm)}
     if p.hidden_px is not None:
         readings["hidden_px"] = p.hidden_px

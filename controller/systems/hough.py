@@ -40,8 +40,10 @@ class HoughEstimator(ModelEstimator):
         record.update(outline_angle_deg=c.angle_deg, outline_centre_px=list(c.centre_px),
                       widths_px=list(c.widths_px), votes=c.votes,
                       psom_s=p.psom_s.tolist(), dphi_deg=p.dphi_deg)
+        share = self.model.front.seen_share(loc.area_px)
+        record["seen_share"] = share
         return TranslationEstimate("ok", p.dxdy_mm[0], p.dxdy_mm[1], loc.u_px, loc.v_px,
-                                   record=record, percept=p)
+                                   record=record, percept=p, seen_share=share)
 
     def estimate_rotation(self, translation: TranslationEstimate) -> RotationEstimate:
         """The validated outline's rotation; see ``Estimator.estimate_rotation``."""

@@ -31,9 +31,11 @@ class PcaEstimator(ModelEstimator):
         if p.nn1_mm is None:
             return TranslationEstimate(loc.status, reason=loc.reason,
                                        record={"area_px": loc.area_px}, percept=p)
+        share = self.model.front.seen_share(loc.area_px)
         return TranslationEstimate("ok", p.nn1_mm[0], p.nn1_mm[1], loc.u_px, loc.v_px,
-                                   record={"area_px": loc.area_px, "nn1": list(p.nn1_mm)},
-                                   percept=p)
+                                   record={"area_px": loc.area_px, "seen_share": share,
+                                           "nn1": list(p.nn1_mm)},
+                                   percept=p, seen_share=share)
 
     def estimate_rotation(self, translation: TranslationEstimate) -> RotationEstimate:
         """Eigenimage projections and the fuzzy controller; see

@@ -16,6 +16,7 @@ from calibration_free.gabor import GaborConfig
 from calibration_free.model_file import pack_model
 from calibration_free.perception import Perception
 from calibration_free.synthetic import render
+from drivers.core.errors import ConfigError
 from drivers.core.typed_config import to_mapping
 
 from .conftest import KAPPA, NOMINAL_POSE
@@ -114,9 +115,12 @@ def test_a_file_in_the_version_4_layout_loads_and_is_still_written(bundle, cell,
     arrays = {k: v for k, v in bundle.arrays().items() if not k.startswith("nn1_near.")}
     path.write_bytes(pack(version_4_info(bundle), arrays, version=4))
     old = ModelBundle.load(path, expect_object="cube")
-    # a version-4 file has no learned colour: the same front end without the colour check
+    # a version-4 file has no learned colour nor taught area: the same front end without the
+    # colour check and the hidden-part check
     assert old.front.chroma is None and bundle.front.chroma is not None
-    assert old.front == dataclasses.replace(bundle.front, chroma=None, chroma_tolerance=0.0)
+    assert old.front.taught_area_px is None and bundle.front.taught_area_px is not None
+    assert old.front == dataclasses.replace(bundle.front, chroma=None, chroma_tolerance=0.0,
+                                            taught_area_px=None)
     assert old.training == {"seed": 0}
     # no near net: every look's translation is nn1_rot's, as version 4 perceived
     assert old.near_mm == 0.0 and old.format_version == 4
@@ -133,7 +137,8 @@ def test_a_file_in_the_version_4_layout_loads_and_is_still_written(bundle, cell,
                                        "chroma": list(bundle.front.chroma),
                                        "chroma_tolerance": bundle.front.chroma_tolerance,
                                        "feature_floor": bundle.front.feature_floor,
-                                       "feature_ceiling": bundle.front.feature_ceiling}
+                                       "feature_ceiling": bundle.front.feature_ceiling,
+                                       "taught_area_px": bundle.front.taught_area_px}
     assert written["frame_px"] == expected["frame_px"]
     assert written["intensity"] == expected["intensity"]
 
@@ -254,3 +259,24 @@ def test_a_bars_end_map_round_trips_and_a_version_6_file_has_none(bundle, tmp_pa
     path.write_bytes(pack(info, tensors, version=6))
     old = ModelBundle.load(path, expect_object="ledge")
     assert old.format_version == 6 and old.axis is not None and old.axis.ends is None
+
+
+def test_the_taught_area_is_learned_and_checked(bundle, cell, tmp_path):
+    """The part's blob area at the taught pose (the hidden-part check's reference): the
+    taught-pose frames' mean, which a frame there reads back."""
+    front = bundle.front
+    frame = render(cell, np.array([0.0, 0.0, 0.0]), np.random.default_rng(5))
+    _, loc = front.locate(frame)
+    assert loc.ok and front.seen_share(loc.area_px) == pytest.approx(1.0, abs=0.03)
+    # what a card hides shows in the share
+    assert front.seen_share(0.7 * loc.area_px) == pytest.approx(0.7, abs=0.03)
+    for bad in (0.0, -5.0, float("nan"), True, "1600"):
+        with pytest.raises(ConfigError, match="taught_area_px"):
+            dataclasses.replace(front, taught_area_px=bad)
+    # in a model file: refused with the file named, as any bad field
+    info, tensors = info_and_tensors(bundle)
+    info["localisation"]["taught_area_px"] = -1.0
+    path = tmp_path / "bad-area.bundle"
+    path.write_bytes(pack(info, tensors))
+    with pytest.raises(BundleError, match="bad-area.bundle.*taught_area_px"):
+        ModelBundle.load(path)

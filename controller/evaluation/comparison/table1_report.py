@@ -84,9 +84,9 @@ def _accuracy(result: Table1Result) -> list[str]:
 
 def _failures(result: Table1Result) -> list[str]:
     lines = ["| system | light | converged | budget spent | no object | ambiguous | "
-             "out of range | inconsistent | rejected | converged off target | failure rate | "
-             "no-object rate | grasp success |",
-             "|---|---|---|---|---|---|---|---|---|---|---|---|---|"]
+             "out of range | inconsistent | occluded | rejected | converged off target | "
+             "failure rate | no-object rate | grasp success |",
+             "|---|---|---|---|---|---|---|---|---|---|---|---|---|---|"]
     for r in result.reports:
         key = (r["system"], r["lighting"])
         o = r["outcomes"]

@@ -253,3 +253,43 @@ def test_the_turn_check_expects_the_rest_of_a_turn_taken_in_part():
     arm, cam, cfg = make(ToolStep(1.0, -1.0, 0.0, 170.0), limits=limits)
     assert PositioningLoop(arm, cam, cfg).run(TruthEstimator(arm, kappa=1)).outcome == \
         "converged"
+
+
+class HiddenPartEstimator(TruthEstimator):
+    """Reads the way back to NOMINAL, but sees only ``share`` of the part's taught area."""
+
+    def __init__(self, arm, share, **kw):
+        super().__init__(arm, **kw)
+        self.share = share
+
+    def estimate_translation(self, image):
+        return dataclasses.replace(super().estimate_translation(image), seen_share=self.share)
+
+
+@pytest.mark.parametrize("share, outcome", [(0.7, "occluded"), (0.9, "converged"),
+                                            (None, "converged")])
+def test_a_part_seen_much_smaller_than_taught_ends_the_loop_as_occluded(share, outcome,
+                                                                        tmp_path):
+    arm, cam, cfg = make(ToolStep(10.0, -8.0, 0.0, 20.0))
+    with IterationLog(tmp_path / "it.jsonl") as log:
+        result = PositioningLoop(arm, cam, cfg, log).run(HiddenPartEstimator(arm, share))
+    assert result.outcome == outcome and result.ok == (outcome == "converged")
+    if outcome == "occluded":
+        assert "70%" in result.reason and "hides" in result.reason
+        stop = read_log(tmp_path / "it.jsonl")[-1]
+        assert stop["loop_kind"] == "stop" and stop["executed"] is None
+    # far from the pose the blob's size says nothing: the loop moved there as usual
+    assert len(arm.moves) >= 2
+
+
+def test_the_hidden_check_also_ends_a_spent_budget_near_the_pose_and_can_be_off():
+    # the budget ends with the loop near the pose: a grasp would follow a "budget" outcome
+    arm, cam, cfg = make(ToolStep(1.0, 0.0, 0.0, 30.0), max_loops=1.0)
+    assert PositioningLoop(arm, cam, cfg).run(
+        HiddenPartEstimator(arm, 0.7, gain=0.5)).outcome == "occluded"
+    arm, cam, cfg = make(ToolStep(1.0, 0.0, 0.0, 30.0), max_loops=1.0)
+    assert PositioningLoop(arm, cam, cfg).run(
+        HiddenPartEstimator(arm, 0.9, gain=0.5)).outcome == "budget"
+    arm, cam, cfg = make(ToolStep(1.0, 0.0, 0.0, 0.0), hidden_check_share=None)
+    assert PositioningLoop(arm, cam, cfg).run(
+        HiddenPartEstimator(arm, 0.5)).outcome == "converged"

@@ -80,8 +80,8 @@ def test_markdown_has_every_section_and_row(result):
     for heading in ("## Accuracy", "## Outcomes and failures", "## Cost", "## Verdict",
                     "## Why", "## The paper's Table 1"):
         assert heading in md
-    assert "| hough | poor | 0 | 0 | 2 | 0 | 0 | 0 | 0 | 0 | 100% | 100% | 50% |" in md
-    assert "| hough | good | 2 | 0 | 0 | 0 | 0 | 0 | 0 | 1 | 50% | 0% | 50% |" in md
+    assert "| hough | poor | 0 | 0 | 2 | 0 | 0 | 0 | 0 | 0 | 0 | 100% | 100% | 50% |" in md
+    assert "| hough | good | 2 | 0 | 0 | 0 | 0 | 0 | 0 | 0 | 1 | 50% | 0% | 50% |" in md
     assert "| gabor | good | 0.20, 0.10, 1.00 | 0.10, 0.00, 0.50 |" in md
     assert "never / never | 2 of 2 |" in md
     assert "| gabor | 36 | 126 | 3.0 | 1.5 | 20 / 20 |" in md
