@@ -79,6 +79,9 @@ class FrontEnd:
             frames taken there): where the loop settles, a blob much smaller than this is a
             part partly hidden (``seen_share``). None: not known (model files written before
             it).
+        taught_outline_px: the blob's outline in a frame at the taught pose, about its
+            centre (``calibration_free.outline``): a part partly hidden is centred on the
+            outline it shows. None: not known (model files written before it).
     """
 
     frame_height_px: int
@@ -96,8 +99,19 @@ class FrontEnd:
     feature_floor: float = 0.0
     feature_ceiling: float = 0.0
     taught_area_px: float | None = None
+    taught_outline_px: tuple[tuple[float, float], ...] | None = None
 
     def __post_init__(self) -> None:
+        if self.taught_outline_px is not None:
+            try:
+                outline = tuple((float(u), float(v)) for u, v in self.taught_outline_px)
+            except (TypeError, ValueError):
+                outline = ()
+            if len(outline) < 8 or not all(math.isfinite(u) and math.isfinite(v)
+                                           for u, v in outline):
+                raise ConfigError("front end: taught_outline_px must be 8 or more finite "
+                                  "(u, v) pairs or none")
+            object.__setattr__(self, "taught_outline_px", outline)
         taught = self.taught_area_px
         if taught is not None and (isinstance(taught, bool) or not isinstance(
                 taught, (int, float)) or not 0.0 < taught < math.inf):
@@ -270,13 +284,16 @@ class FrontEnd:
                                  "chroma_tolerance": self.chroma_tolerance,
                                  "feature_floor": self.feature_floor,
                                  "feature_ceiling": self.feature_ceiling,
-                                 "taught_area_px": self.taught_area_px}}
+                                 "taught_area_px": self.taught_area_px,
+                                 "taught_outline_px": None if self.taught_outline_px is None
+                                 else [list(p) for p in self.taught_outline_px]}}
 
     @classmethod
     def from_info(cls, info: Mapping[str, Any]) -> FrontEnd:
         """Inverse of ``to_info``. ``localisation.channel``, ``nominal_uv_px``, ``chroma``,
-        ``feature_floor``, ``feature_ceiling`` and ``taught_area_px`` may be absent (model
-        files written before they were stored): "max", None, None, 0, 0 and None.
+        ``feature_floor``, ``feature_ceiling``, ``taught_area_px`` and ``taught_outline_px``
+        may be absent (model files written before they were stored): "max", None, None, 0,
+        0, None and None.
 
         Args:
             info: a model file's JSON (at least ``frame_px``, ``intensity``,
@@ -299,7 +316,8 @@ class FrontEnd:
                    float(loc.get("chroma_tolerance", 0.0)),
                    float(loc.get("feature_floor", 0.0)),
                    float(loc.get("feature_ceiling", 0.0)),
-                   None if taught is None else float(taught))
+                   None if taught is None else float(taught),
+                   loc.get("taught_outline_px"))
 
 
 # The colour preference's tolerance: this many times the largest chromaticity distance seen among

@@ -20,6 +20,11 @@ from calibration_free.bundle import ModelBundle
 from calibration_free.ends import hidden_end_shift
 from calibration_free.gabor import GaborBank
 from calibration_free.localise import Localisation
+from calibration_free.outline import fit_outline
+
+# A part seen this share smaller than at the taught pose is centred on the outline it shows
+# (``calibration_free.outline``); the loop's hidden-part check uses the same share.
+OUTLINE_BELOW = 0.1
 
 
 @dataclass(frozen=True)
@@ -48,8 +53,12 @@ class Percept:
         hidden_px: for a bar (kappa 2) with one end hidden, the length hidden (px)
             (``calibration_free.ends``); None: the whole bar is seen, or no correction.
         centre_px: the part's centre the translation nets read: the localisation's, or for
-            a bar with one end hidden where the end seen puts it (the features still look
-            at the ROI around the blob seen).
+            a bar with one end hidden where the end seen puts it, or for a part partly
+            hidden where the outline it shows puts it (the features still look at the ROI
+            around the blob seen).
+        hidden_share: for a part partly hidden whose centre was read from the outline it
+            shows (``calibration_free.outline``), the share of its taught area not seen;
+            None: seen whole, or no correction.
     """
 
     localisation: Localisation
@@ -66,6 +75,7 @@ class Percept:
     axis_deg: float | None = None
     hidden_px: float | None = None
     centre_px: tuple[float, float] | None = None
+    hidden_share: float | None = None
 
     @property
     def ok(self) -> bool:
@@ -134,11 +144,23 @@ class Perception:
             t_ends = clock()
             timings["ends"] = (t_ends - t2) / 1e3
             t2 = t_ends
+        hidden_share = None
+        share = self._front.seen_share(loc.area_px)
+        if hidden_px is None and share is not None and share < 1.0 - OUTLINE_BELOW \
+                and self._front.taught_outline_px is not None:
+            fit = fit_outline(normalised, loc.part_mask, loc.u_px, loc.v_px,
+                              self._front.taught_outline_px, self._front.threshold)
+            if fit is not None:
+                centre, hidden_share = (fit.u_px, fit.v_px), 1.0 - share
+            t_outline = clock()
+            timings["outline"] = (t_outline - t2) / 1e3
+            t2 = t_outline
         dx, dy = self.bundle.nn1(np.array(centre))
         t3 = clock()
         timings.update(nn1=(t3 - t2) / 1e3, total=(t3 - t0) / 1e3)
         return Percept(loc, (float(dx), float(dy)), None, None, None, timings,
-                       normalised=normalised, hidden_px=hidden_px, centre_px=centre)
+                       normalised=normalised, hidden_px=hidden_px, centre_px=centre,
+                       hidden_share=hidden_share)
 
     def rotation(self, percept: Percept) -> Percept:
         """Go on from a ``translation`` percept of the same frame: ROI -> Gabor features ->
@@ -183,7 +205,7 @@ class Perception:
                        total=timings["total"] + (t6 - t3) / 1e3)
         return Percept(loc, percept.nn1_mm, features, (float(s), float(c)), dphi, timings,
                        full_mm, percept.normalised, rot_mm, near, nn2_deg, axis_deg,
-                       percept.hidden_px, percept.centre_px)
+                       percept.hidden_px, percept.centre_px, percept.hidden_share)
 
     def perceive(self, image: np.ndarray) -> Percept:
         """The whole path in one pass: corrective translation (NN1) and rotation (NN2).

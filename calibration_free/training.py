@@ -38,6 +38,7 @@ from calibration_free.localise import (
     otsu_threshold,
 )
 from calibration_free.mlp import TrainedMLP, train_mlp
+from calibration_free.outline import taught_outline
 from calibration_free.preprocess import (
     Channel,
     IntensityStats,
@@ -241,15 +242,18 @@ def prepare_training(sets: dict[str, Dataset], polarity: Polarity = "bright",
              for name in sets for i in usable[name]]
     colour = learn_chroma([im for im, _ in blobs], [b for _, b in blobs])
     chroma, chroma_tolerance = colour if colour is not None else (None, 0.0)
-    # The part's area where the loop settles: the frames taken at the taught pose.
-    taught = [found[name][i].area_px for name in sets
-              for i in np.flatnonzero(at_taught_pose(sets[name].labels))
-              if found[name][i].ok]
+    # The part's area and outline where the loop settles: the frames taken at the taught pose.
+    at_pose = [found[name][i] for name in sets
+               for i in np.flatnonzero(at_taught_pose(sets[name].labels)) if found[name][i].ok]
+    taught = [loc.area_px for loc in at_pose]
+    outline = (taught_outline(at_pose[0].part_mask, at_pose[0].u_px, at_pose[0].v_px)
+               if at_pose else None)
     front = FrontEnd(height, width, intensity, threshold, polarity, expected_area, tolerance,
                      max_elongation, channel, chroma=chroma, chroma_tolerance=chroma_tolerance,
                      feature_floor=FEATURE_FLOOR if channel == "saturation" else 0.0,
                      feature_ceiling=FEATURE_CEILING if channel == "saturation" else 0.0,
-                     taught_area_px=float(np.mean(taught)) if taught else None)
+                     taught_area_px=float(np.mean(taught)) if taught else None,
+                     taught_outline_px=outline)
     return PreparedSets(front, located, found, usable, time.perf_counter() - start)
 
 

@@ -45,7 +45,9 @@ class GaborEstimator:
         if not p.ok:
             return TranslationEstimate(loc.status, reason=loc.reason,
                                        record={"area_px": loc.area_px}, percept=p)
-        # a bar read from the end it shows has its hidden part accounted for
+        # a bar read from the end it shows has its hidden part accounted for; a part centred
+        # on the outline it shows is still reported partly hidden (its turn is read from
+        # the cut silhouette)
         share = (None if p.hidden_px is not None
                  else self.perception.bundle.front.seen_share(loc.area_px))
         return TranslationEstimate("ok", p.full_mm[0], p.full_mm[1], loc.u_px, loc.v_px,
@@ -69,11 +71,14 @@ class GaborEstimator:
 def _translation_readings(p: Percept) -> dict[str, Any]:
     """The rotation-aware nets' readings for the iteration record: ``nn1_rot``'s, the
     translation with the near net's correction when it was added, NN2's rotation reading
-    (``nn2_deg``), the long axis' where it read one (``axis_deg``), and the length of a bar
-    found hidden at one end (``hidden_px``; its centre was moved back)."""
+    (``nn2_deg``), the long axis' where it read one (``axis_deg``), the length of a bar
+    found hidden at one end (``hidden_px``; its centre was moved back), and the share of a
+    part hidden whose centre was read from the outline it shows (``hidden_share``)."""
     readings: dict[str, Any] = {"nn1_rot": list(p.rot_mm)}
     if p.hidden_px is not None:
         readings["hidden_px"] = p.hidden_px
+    if p.hidden_share is not None:
+        readings["hidden_share"] = p.hidden_share
     if p.near:
         readings["nn1_near"] = list(p.full_mm)
     if p.nn2_deg is not None:

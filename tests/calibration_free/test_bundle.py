@@ -115,12 +115,12 @@ def test_a_file_in_the_version_4_layout_loads_and_is_still_written(bundle, cell,
     arrays = {k: v for k, v in bundle.arrays().items() if not k.startswith("nn1_near.")}
     path.write_bytes(pack(version_4_info(bundle), arrays, version=4))
     old = ModelBundle.load(path, expect_object="cube")
-    # a version-4 file has no learned colour nor taught area: the same front end without the
-    # colour check and the hidden-part check
+    # a version-4 file has no learned colour nor taught area and outline: the same front end
+    # without the colour check, the hidden-part check and the outline fit
     assert old.front.chroma is None and bundle.front.chroma is not None
     assert old.front.taught_area_px is None and bundle.front.taught_area_px is not None
     assert old.front == dataclasses.replace(bundle.front, chroma=None, chroma_tolerance=0.0,
-                                            taught_area_px=None)
+                                            taught_area_px=None, taught_outline_px=None)
     assert old.training == {"seed": 0}
     # no near net: every look's translation is nn1_rot's, as version 4 perceived
     assert old.near_mm == 0.0 and old.format_version == 4
@@ -138,7 +138,9 @@ def test_a_file_in_the_version_4_layout_loads_and_is_still_written(bundle, cell,
                                        "chroma_tolerance": bundle.front.chroma_tolerance,
                                        "feature_floor": bundle.front.feature_floor,
                                        "feature_ceiling": bundle.front.feature_ceiling,
-                                       "taught_area_px": bundle.front.taught_area_px}
+                                       "taught_area_px": bundle.front.taught_area_px,
+                                       "taught_outline_px": [
+                                           list(p) for p in bundle.front.taught_outline_px]}
     assert written["frame_px"] == expected["frame_px"]
     assert written["intensity"] == expected["intensity"]
 

@@ -1,0 +1,174 @@
+"""A part partly hidden: where its centre is, from the part of its outline that shows.
+
+Something lying on the part (a card, another part) hides some of it: the blob is smaller than
+at the taught pose, and its centre lies off the part's, away from the hidden side (a quarter
+of a cube hidden moved it by 4-6 px, the loop settled 4-5 mm off). The outline seen is made
+of two kinds of edge: the part's own, with the table beyond it, and the edge of whatever
+hides it, with that thing beyond. So the outline's points are sorted by what lies just beyond
+them (the localisation channel there closer to the table's level than BEYOND_SHARE of the way
+to the part's threshold: the table), and the outline taught (``taught_outline``: the blob's
+outline in a frame at the taught pose, about its centre) is fitted to the points with the
+table beyond: a similarity (turn, scale, shift) by iterative closest points. The fitted shift
+is where the whole part's centre lies. A fit is taken only where it is good (RMS distance of
+the points within MAX_RMS_PX, enough points, a scale and a turn the loop can meet near the
+pose); otherwise nothing is moved, and the loop's hidden-part check stops it where it would
+end.
+
+Measured on the simulated cell (a card over a quarter of the cube in the camera's view, 30
+poses within 3 mm and 3 deg of the taught pose, either end): the blob's centre 4.5 / 6.2 px
+RMS off the whole part's, the fitted one 0.6 / 0.8 px.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import cv2
+import numpy as np
+
+# An outline point has the table beyond it where the channel 2-6 px out along its normal
+# stands less than this share of the way from the table's level to the part's threshold (a
+# slate card in saturation: 0.7-1.0 of the way in good light, 0.4-0.55 in poor).
+BEYOND_SHARE = 0.3
+BEYOND_PX = (2, 6)
+# The taught outline keeps at most this many points (every k-th of its contour).
+OUTLINE_POINTS = 120
+# The fit uses at most FIT_POINTS of the points seen and stops after ITERATIONS, or once the
+# shift moves less than a thousandth of a pixel.
+FIT_POINTS = 200
+ITERATIONS = 20
+# A fit is taken where its points lie within this RMS distance of the taught outline, at
+# least MIN_KEPT_SHARE of the taught outline's length shows the table beyond it,
+# and the fitted scale and turn are within these (near the taught pose: the image scale
+# changes about 1% a mm of height, the loop turns the part to within a few degrees).
+MAX_RMS_PX = 1.0
+MIN_KEPT_SHARE = 0.4
+SCALE_RANGE = (0.85, 1.15)
+MAX_TURN_DEG = 30.0
+# Something lies against the part where at least this share of its outline has something
+# other than the table beyond it (a whole part on the table: a few points, in a shadow).
+MIN_CUT_SHARE = 0.1
+
+
+@dataclass(frozen=True)
+class OutlineFit:
+    """Where the taught outline fits the part's edges that show: the whole part's centre
+    (``u_px``, ``v_px``), the fit's turn (image deg) and scale, its RMS distance (px) and how
+    many outline points it used."""
+
+    u_px: float
+    v_px: float
+    turn_deg: float
+    scale: float
+    rms_px: float
+    points: int
+
+
+def contour(mask: np.ndarray) -> np.ndarray | None:
+    """The outer contour of the largest blob of a binary mask, (N, 2) float (u, v), or None
+    for an empty mask."""
+    contours, _ = cv2.findContours(mask, cv2.RETR_EXTERNAL, cv2.CHAIN_APPROX_NONE)
+    if not contours:
+        return None
+    return max(contours, key=len).reshape(-1, 2).astype(np.float64)
+
+
+def taught_outline(part_mask: np.ndarray, u_px: float, v_px: float
+                   ) -> tuple[tuple[float, float], ...] | None:
+    """The outline to store at training: at most OUTLINE_POINTS points of the blob's outer
+    contour in a frame at the taught pose, about the localisation's centre (``u_px``,
+    ``v_px``)."""
+    points = contour(part_mask)
+    if points is None or len(points) < 8:
+        return None
+    points = points[::max(1, math.ceil(len(points) / OUTLINE_POINTS))]
+    return tuple((float(u - u_px), float(v - v_px)) for u, v in points)
+
+
+def _outward_normals(points: np.ndarray, centre: np.ndarray) -> np.ndarray:
+    """Unit normals of a closed contour, pointing away from ``centre``."""
+    tangent = np.roll(points, -2, axis=0) - np.roll(points, 2, axis=0)
+    normals = np.column_stack([tangent[:, 1], -tangent[:, 0]])
+    normals /= np.maximum(np.linalg.norm(normals, axis=1, keepdims=True), 1e-9)
+    flip = np.einsum("ij,ij->i", points - centre, normals) < 0.0
+    normals[flip] *= -1.0
+    return normals
+
+
+def _beyond(channel: np.ndarray, points: np.ndarray, normals: np.ndarray) -> np.ndarray:
+    """The channel's mean from BEYOND_PX[0] to BEYOND_PX[1] px out along each normal."""
+    height, width = channel.shape
+    total = np.zeros(len(points))
+    steps = range(BEYOND_PX[0], BEYOND_PX[1] + 1)
+    for d in steps:
+        at = points + d * normals
+        u = np.clip(np.rint(at[:, 0]).astype(np.intp), 0, width - 1)
+        v = np.clip(np.rint(at[:, 1]).astype(np.intp), 0, height - 1)
+        total += channel[v, u]
+    return total / len(steps)
+
+
+def _similarity(src: np.ndarray, dst: np.ndarray) -> tuple[np.ndarray, float, np.ndarray]:
+    """The turn R, scale s and shift t with s R src + t nearest ``dst`` in least squares
+    (Umeyama's solution)."""
+    ms, md = src.mean(axis=0), dst.mean(axis=0)
+    a, b = src - ms, dst - md
+    u, sv, vt = np.linalg.svd(b.T @ a / len(src))
+    d = np.diag([1.0, -1.0 if np.linalg.det(u @ vt) < 0.0 else 1.0])
+    rot = u @ d @ vt
+    scale = float(np.trace(np.diag(sv) @ d) / max((a * a).sum(axis=1).mean(), 1e-12))
+    return rot, scale, md - scale * rot @ ms
+
+
+def fit_outline(channel: np.ndarray, part_mask: np.ndarray, u_px: float, v_px: float,
+                outline: tuple[tuple[float, float], ...], threshold: float
+                ) -> OutlineFit | None:
+    """Where the part's centre lies, from the outline points with the table beyond them;
+    None where no good fit is found (module docstring).
+
+    Args:
+        channel: the localisation channel the blob was found in (the normalised frame).
+        part_mask: the full-frame mask of the part's blob (``Localisation.part_mask``).
+        u_px, v_px: the blob's centre (the fit starts from the taught outline there).
+        outline: the taught outline about its centre (``taught_outline``).
+        threshold: the part's threshold in ``channel``.
+    """
+    points = contour(part_mask)
+    template = np.asarray(outline, dtype=np.float64)
+    if points is None or len(points) < 8 or len(template) < 8:
+        return None
+    centre = np.array([u_px, v_px])
+    table = float(np.median(channel[::4, ::4]))
+    level = table + BEYOND_SHARE * (threshold - table)
+    beyond = _beyond(channel, points, _outward_normals(points, centre))
+    table_beyond = (beyond - level) * (threshold - table) <= 0.0
+    if table_beyond.mean() > 1.0 - MIN_CUT_SHARE:
+        return None  # the table all round: the part is not hidden, it is seen from elsewhere
+    seen = points[table_beyond]
+    # the contour's points are a pixel apart, the taught outline's a few: compare the points
+    # seen with the taught outline's length
+    perimeter = float(np.linalg.norm(np.diff(template, axis=0, append=template[:1]),
+                                     axis=1).sum())
+    if len(seen) < MIN_KEPT_SHARE * perimeter:
+        return None
+    seen = seen[::max(1, math.ceil(len(seen) / FIT_POINTS))]
+    seen_sq = (seen * seen).sum(axis=1)[:, None]
+
+    def gaps(placed: np.ndarray) -> np.ndarray:  # squared distances, seen x placed
+        return seen_sq + (placed * placed).sum(axis=1)[None, :] - 2.0 * seen @ placed.T
+
+    rot, scale, shift = np.eye(2), 1.0, centre.copy()
+    for _ in range(ITERATIONS):
+        last = shift
+        nearest = gaps(scale * template @ rot.T + shift).argmin(axis=1)
+        rot, scale, shift = _similarity(template[nearest], seen)
+        if np.abs(shift - last).max() < 1e-3:
+            break
+    closest = gaps(scale * template @ rot.T + shift).min(axis=1)
+    rms = float(np.sqrt(np.maximum(closest, 0.0).mean()))
+    turn = math.degrees(math.atan2(rot[1, 0], rot[0, 0]))
+    if rms > MAX_RMS_PX or not SCALE_RANGE[0] <= scale <= SCALE_RANGE[1] \
+            or abs(turn) > MAX_TURN_DEG:
+        return None
+    return OutlineFit(float(shift[0]), float(shift[1]), turn, scale, rms, len(seen))

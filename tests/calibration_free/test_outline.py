@@ -1,0 +1,116 @@
+"""A part partly hidden, centred on the outline it shows (``calibration_free.outline``).
+
+A synthetic square part (a cube seen from above), drawn with anti-aliased edges into a
+saturation-like channel (the part at 200, the table at 10, a slate card at 90): the taught
+outline fitted to the edges with the table beyond them must put the centre of a part whose
+one side is under the card where the whole part's centre is, and must leave a part alone
+that nothing hides or too little of which shows.
+"""
+
+from __future__ import annotations
+
+import math
+
+import cv2
+import numpy as np
+import pytest
+
+from calibration_free.front_end import FrontEnd
+from calibration_free.outline import fit_outline, taught_outline
+from calibration_free.preprocess import IntensityStats
+from drivers.core.errors import ConfigError
+
+SIZE = (144, 192)  # rows, columns
+SUPERSAMPLE = 4
+THRESHOLD = 117.0
+TABLE, PART, CARD = 10.0, 200.0, 90.0
+HALF = 20.0  # px: half the square's side
+TAUGHT = (96.0, 70.0)
+
+
+def square_frame(centre: tuple[float, float], turn_deg: float, card_rows: float = 0.0
+                 ) -> tuple[np.ndarray, np.ndarray]:
+    """The channel and the part's mask: the square turned by ``turn_deg`` about ``centre``,
+    and a card lying over its top ``card_rows`` px (running on beyond it, up the image)."""
+    s = SUPERSAMPLE
+    a = math.radians(turn_deg)
+    corners = np.array([[-HALF, -HALF], [HALF, -HALF], [HALF, HALF], [-HALF, HALF]])
+    rot = np.array([[math.cos(a), -math.sin(a)], [math.sin(a), math.cos(a)]])
+    pts = (corners @ rot.T + np.array(centre)) * s
+    big = np.full((SIZE[0] * s, SIZE[1] * s), TABLE, np.float32)
+    cv2.fillPoly(big, [np.rint(pts).astype(np.int32)], PART)
+    if card_rows:
+        top = int(round((centre[1] - HALF * 1.5 + card_rows) * s))
+        left, right = int((centre[0] - 60) * s), int((centre[0] + 60) * s)
+        big[:top, left:right] = CARD
+    channel = cv2.resize(big, (SIZE[1], SIZE[0]), interpolation=cv2.INTER_AREA)
+    mask = np.where(channel > THRESHOLD, 255, 0).astype(np.uint8)
+    return channel, mask
+
+
+def centre_of(mask: np.ndarray) -> tuple[float, float]:
+    m = cv2.moments(mask, binaryImage=True)
+    return m["m10"] / m["m00"], m["m01"] / m["m00"]
+
+
+@pytest.fixture(scope="module")
+def outline():
+    _, mask = square_frame(TAUGHT, 0.0)
+    return taught_outline(mask, *centre_of(mask))
+
+
+@pytest.mark.parametrize("shift, turn", [((0.0, 0.0), 0.0), ((2.5, -1.5), 4.0),
+                                         ((-3.0, 2.0), -6.0)])
+def test_a_part_with_a_side_under_a_card_is_centred_on_the_outline_it_shows(outline, shift,
+                                                                            turn):
+    centre = (TAUGHT[0] + shift[0], TAUGHT[1] + shift[1])
+    channel, mask = square_frame(centre, turn, card_rows=20.0)  # the top 10 px hidden
+    blob = centre_of(mask)
+    assert math.dist(blob, centre) > 4.0  # the blob's centre is off by half the cut
+    fit = fit_outline(channel, mask, *blob, outline, THRESHOLD)
+    assert fit is not None and math.dist((fit.u_px, fit.v_px), centre) < 0.6, fit
+    assert fit.rms_px < 0.8 and abs(fit.scale - 1.0) < 0.03
+
+
+def test_a_part_nothing_hides_or_too_little_of_which_shows_is_left_alone(outline):
+    channel, mask = square_frame(TAUGHT, 3.0)
+    assert fit_outline(channel, mask, *centre_of(mask), outline, THRESHOLD) is None
+    channel, mask = square_frame(TAUGHT, 0.0, card_rows=44.0)  # a sliver of the part left
+    assert fit_outline(channel, mask, *centre_of(mask), outline, THRESHOLD) is None
+    assert taught_outline(np.zeros(SIZE, np.uint8), 0.0, 0.0) is None
+
+
+def test_the_front_end_keeps_a_taught_outline_and_refuses_a_bad_one(outline):
+    front = FrontEnd(144, 192, IntensityStats(100.0, 20.0), THRESHOLD, "bright", 1600.0,
+                     taught_area_px=1600.0, taught_outline_px=outline)
+    again = FrontEnd.from_info(front.to_info())
+    assert again == front and len(again.taught_outline_px) == len(outline)
+    for bad in ([(0.0, 0.0)] * 3, [(float("nan"), 0.0)] * 10, [("a", "b")] * 10, 5):
+        with pytest.raises(ConfigError, match="taught_outline_px"):
+            FrontEnd(144, 192, IntensityStats(100.0, 20.0), THRESHOLD, "bright", 1600.0,
+                     taught_outline_px=bad)
+
+
+def test_perception_centres_a_part_under_a_card_and_says_how_much_is_hidden(
+        saturation_bundle, cell):
+    """On the synthetic cube: a slate card painted over the top fifth of the part moves the
+    blob's centre by pixels; the translation nets read the centre the outline puts back."""
+    from calibration_free.perception import Perception
+    from calibration_free.synthetic import render
+
+    perception = Perception(saturation_bundle)
+    frame = render(cell, np.array([1.0, -0.5, 2.0]))
+    whole = perception.translation(frame)
+    assert whole.ok and whole.hidden_share is None and whole.centre_px == (whole.u_px,
+                                                                           whole.v_px)
+    mask = whole.localisation.part_mask > 0
+    rows = np.flatnonzero(mask.any(axis=1))
+    cols = np.flatnonzero(mask.any(axis=0))
+    carded = frame.copy()
+    cut = rows[0] + (rows[-1] - rows[0]) // 5
+    carded[:cut, cols[0] - 15:cols[-1] + 15] = (70, 80, 115)  # a slate card, up the image
+    hidden = perception.translation(carded)
+    assert hidden.ok and hidden.hidden_share is not None and hidden.hidden_share > 0.1
+    assert math.dist((hidden.u_px, hidden.v_px), whole.centre_px) > 1.2
+    assert math.dist(hidden.centre_px, whole.centre_px) < 0.5, (hidden.centre_px, whole.centre_px)
+    assert "outline" in hidden.timings_us
