@@ -109,6 +109,27 @@ def _beyond(channel: np.ndarray, points: np.ndarray, normals: np.ndarray) -> np.
     return total / len(steps)
 
 
+def _table_beyond(channel: np.ndarray, points: np.ndarray, centre: np.ndarray,
+                  threshold: float) -> np.ndarray:
+    """Which outline points have the table beyond them (module docstring)."""
+    table = float(np.median(channel[::4, ::4]))
+    level = table + BEYOND_SHARE * (threshold - table)
+    beyond = _beyond(channel, points, _outward_normals(points, centre))
+    return (beyond - level) * (threshold - table) <= 0.0
+
+
+def cut_share(channel: np.ndarray, part_mask: np.ndarray, u_px: float, v_px: float,
+              threshold: float) -> float:
+    """The share of a blob's outline with something other than the table beyond it: near 0
+    for a part lying free on the table, MIN_CUT_SHARE or more where something lies on or
+    against it."""
+    points = contour(part_mask)
+    if points is None or len(points) < 8:
+        return 0.0
+    return float(1.0 - _table_beyond(channel, points, np.array([u_px, v_px]),
+                                     threshold).mean())
+
+
 def _similarity(src: np.ndarray, dst: np.ndarray) -> tuple[np.ndarray, float, np.ndarray]:
     """The turn R, scale s and shift t with s R src + t nearest ``dst`` in least squares
     (Umeyama's solution)."""
@@ -139,10 +160,7 @@ def fit_outline(channel: np.ndarray, part_mask: np.ndarray, u_px: float, v_px: f
     if points is None or len(points) < 8 or len(template) < 8:
         return None
     centre = np.array([u_px, v_px])
-    table = float(np.median(channel[::4, ::4]))
-    level = table + BEYOND_SHARE * (threshold - table)
-    beyond = _beyond(channel, points, _outward_normals(points, centre))
-    table_beyond = (beyond - level) * (threshold - table) <= 0.0
+    table_beyond = _table_beyond(channel, points, centre, threshold)
     if table_beyond.mean() > 1.0 - MIN_CUT_SHARE:
         return None  # the table all round: the part is not hidden, it is seen from elsewhere
     seen = points[table_beyond]
@@ -172,3 +190,31 @@ def fit_outline(channel: np.ndarray, part_mask: np.ndarray, u_px: float, v_px: f
             or abs(turn) > MAX_TURN_DEG:
         return None
     return OutlineFit(float(shift[0]), float(shift[1]), turn, scale, rms, len(seen))
+
+
+# The hidden part is drawn at this many times the frame's resolution, then averaged down: its
+# edge gets the sub-pixel ramp a real edge has.
+DRAW_SUPERSAMPLE = 4
+
+
+def completed(channel: np.ndarray, part_mask: np.ndarray, fit: OutlineFit,
+              outline: tuple[tuple[float, float], ...], level: float
+              ) -> tuple[np.ndarray, np.ndarray]:
+    """The frame and the part's mask with the hidden part drawn in where the fit puts the
+    taught outline: the channel raised to ``level`` (the features' ceiling) inside it, with
+    an anti-aliased edge, and the mask grown by it. NN2 then reads the turn of a whole part
+    instead of a cut one (cube, a quarter hidden, turns within 15 deg: 3.4-3.8 -> 1.4-2.1 deg
+    RMS; nut 3.1-5.3 -> 1.5-1.7 deg)."""
+    a = math.radians(fit.turn_deg)
+    rot = np.array([[math.cos(a), -math.sin(a)], [math.sin(a), math.cos(a)]])
+    polygon = fit.scale * np.asarray(outline, dtype=np.float64) @ rot.T \
+        + np.array([fit.u_px, fit.v_px])
+    s = DRAW_SUPERSAMPLE
+    height, width = channel.shape
+    big = np.zeros((height * s, width * s), np.float32)
+    cv2.fillPoly(big, [np.rint((polygon + 0.5) * s - 0.5).astype(np.int32)], 1.0)
+    cover = cv2.resize(big, (width, height), interpolation=cv2.INTER_AREA)
+    frame = np.maximum(channel, cover * np.float32(level))
+    mask = part_mask.copy()
+    mask[cover > 0.5] = 255
+    return frame, mask

@@ -9,6 +9,7 @@ dphi) -> dphi (for an elongated part read from its long axis where the bundle ha
 
 from __future__ import annotations
 
+import dataclasses
 import math
 import time
 from dataclasses import dataclass, field
@@ -20,7 +21,7 @@ from calibration_free.bundle import ModelBundle
 from calibration_free.ends import hidden_end_shift
 from calibration_free.gabor import GaborBank
 from calibration_free.localise import Localisation
-from calibration_free.outline import fit_outline
+from calibration_free.outline import OutlineFit, completed, fit_outline
 
 # A part seen this share smaller than at the taught pose is centred on the outline it shows
 # (``calibration_free.outline``); the loop's hidden-part check uses the same share.
@@ -59,6 +60,8 @@ class Percept:
         hidden_share: for a part partly hidden whose centre was read from the outline it
             shows (``calibration_free.outline``), the share of its taught area not seen;
             None: seen whole, or no correction.
+        outline_fit: that fit (the features then see the part with its hidden part drawn
+            in, ``outline.completed``).
     """
 
     localisation: Localisation
@@ -76,6 +79,7 @@ class Percept:
     hidden_px: float | None = None
     centre_px: tuple[float, float] | None = None
     hidden_share: float | None = None
+    outline_fit: OutlineFit | None = field(default=None, repr=False, compare=False)
 
     @property
     def ok(self) -> bool:
@@ -144,7 +148,7 @@ class Perception:
             t_ends = clock()
             timings["ends"] = (t_ends - t2) / 1e3
             t2 = t_ends
-        hidden_share = None
+        hidden_share, fit = None, None
         share = self._front.seen_share(loc.area_px)
         if hidden_px is None and share is not None and share < 1.0 - OUTLINE_BELOW \
                 and self._front.taught_outline_px is not None:
@@ -160,7 +164,7 @@ class Perception:
         timings.update(nn1=(t3 - t2) / 1e3, total=(t3 - t0) / 1e3)
         return Percept(loc, (float(dx), float(dy)), None, None, None, timings,
                        normalised=normalised, hidden_px=hidden_px, centre_px=centre,
-                       hidden_share=hidden_share)
+                       hidden_share=hidden_share, outline_fit=fit)
 
     def rotation(self, percept: Percept) -> Percept:
         """Go on from a ``translation`` percept of the same frame: ROI -> Gabor features ->
@@ -177,7 +181,14 @@ class Perception:
         clock = time.perf_counter_ns
         t3 = clock()
         loc = percept.localisation
-        roi = self._front.feature_roi(percept.normalised, loc, self._roi_px)
+        frame, seen = percept.normalised, loc
+        fit = percept.outline_fit
+        if fit is not None and self._front.feature_ceiling:
+            # the features see the part with its hidden part drawn in, centred on it
+            frame, mask = completed(frame, loc.part_mask, fit, self._front.taught_outline_px,
+                                    self._front.feature_ceiling * self._front.threshold)
+            seen = dataclasses.replace(loc, u_px=fit.u_px, v_px=fit.v_px, part_mask=mask)
+        roi = self._front.feature_roi(frame, seen, self._roi_px)
         t4 = clock()
         features = self._bank.features(roi)
         t5 = clock()
@@ -205,7 +216,8 @@ class Perception:
                        total=timings["total"] + (t6 - t3) / 1e3)
         return Percept(loc, percept.nn1_mm, features, (float(s), float(c)), dphi, timings,
                        full_mm, percept.normalised, rot_mm, near, nn2_deg, axis_deg,
-                       percept.hidden_px, percept.centre_px, percept.hidden_share)
+                       percept.hidden_px, percept.centre_px, percept.hidden_share,
+                       fit)
 
     def perceive(self, image: np.ndarray) -> Percept:
         """The whole path in one pass: corrective translation (NN1) and rotation (NN2).

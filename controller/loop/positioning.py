@@ -208,6 +208,7 @@ class PositioningLoop:
                                      tr.u_px, tr.v_px, tr.status, dict(tr.record),
                                      loops=loops, error=states[-1].error)
             if tr.status != "ok":
+                record.estimates["reason"] = tr.reason  # why the part was not found
                 self._write(record, "stop", (t0, t1, time.perf_counter()), frame.image)
                 return finish(tr.status, tr.reason or tr.status)
             read_mm = math.hypot(tr.dx_mm, tr.dy_mm)

@@ -16,7 +16,7 @@ import numpy as np
 import pytest
 
 from calibration_free.front_end import FrontEnd
-from calibration_free.outline import fit_outline, taught_outline
+from calibration_free.outline import completed, fit_outline, taught_outline
 from calibration_free.preprocess import IntensityStats
 from drivers.core.errors import ConfigError
 
@@ -114,3 +114,38 @@ def test_perception_centres_a_part_under_a_card_and_says_how_much_is_hidden(
     assert math.dist((hidden.u_px, hidden.v_px), whole.centre_px) > 1.2
     assert math.dist(hidden.centre_px, whole.centre_px) < 0.5, (hidden.centre_px, whole.centre_px)
     assert "outline" in hidden.timings_us
+
+
+def test_the_hidden_part_is_drawn_back_where_the_fit_puts_the_outline(outline):
+    whole_channel, whole = square_frame(TAUGHT, 4.0)
+    channel, mask = square_frame(TAUGHT, 4.0, card_rows=20.0)
+    fit = fit_outline(channel, mask, *centre_of(mask), outline, THRESHOLD)
+    frame, grown = completed(channel, mask, fit, outline, 1.5 * THRESHOLD)
+    overlap = np.logical_and(grown > 0, whole > 0).sum() / np.logical_or(grown > 0,
+                                                                         whole > 0).sum()
+    assert overlap > 0.95 and (mask > 0).sum() < 0.8 * (whole > 0).sum()
+    # inside the part drawn back the channel stands at the level given, the rest is as seen
+    assert frame[int(TAUGHT[1]) - 15, int(TAUGHT[0])] == pytest.approx(1.5 * THRESHOLD)
+    assert np.array_equal(frame[grown == 0], channel[grown == 0])
+
+
+def _front(outline, max_elongation=1.2):
+    return FrontEnd(144, 192, IntensityStats(100.0, 20.0), THRESHOLD, "bright", 1600.0,
+                    area_tolerance=0.6, max_elongation=max_elongation,
+                    nominal_uv_px=TAUGHT, taught_area_px=1600.0, taught_outline_px=outline)
+
+
+def test_a_cut_part_longer_for_its_width_than_trained_is_found_where_something_lies_on_it(
+        outline):
+    front = _front(outline)
+    channel, mask = square_frame(TAUGHT, 0.0, card_rows=20.0)  # 40 x 30 px seen: 1.33
+    found = front.localise(channel)
+    assert found.ok and abs(found.v_px - centre_of(mask)[1]) < 0.5
+    # the same shape on the bare table is not the part: a bar of the part's size
+    bare = np.where(mask > 0, PART, TABLE).astype(np.float32)
+    bare = cv2.GaussianBlur(bare, (3, 3), 0.6)
+    assert front.localise(bare).status == "no_object"
+    # nor is a blob more elongated than CUT_ELONGATION allows, card or not (40 x 18 px: 2.2)
+    channel, mask = square_frame(TAUGHT, 0.0, card_rows=32.0)
+    assert (mask > 0).sum() > 0.4 * 1600.0
+    assert front.localise(channel).status == "no_object"

@@ -74,6 +74,7 @@ def test_no_object_stops_without_moving(status, tmp_path):
     assert arm.moves == []
     (record,) = read_log(tmp_path / "it.jsonl")
     assert record["status"] == status and record["executed"] is None
+    assert record["reason"] == f"scripted {status}"
 
 
 def test_a_correction_beyond_the_training_range_is_not_taken(tmp_path):
