@@ -8,8 +8,11 @@ hides it, with that thing beyond. So the outline's points are sorted by what lie
 them (the localisation channel there closer to the table's level than BEYOND_SHARE of the way
 to the part's threshold: the table), and the outline taught (``taught_outline``: the blob's
 outline in a frame at the taught pose, about its centre) is fitted to the points with the
-table beyond: a similarity (turn, scale, shift) by iterative closest points. The fitted shift
-is where the whole part's centre lies. A fit is taken only where it is good (RMS distance of
+table beyond: a similarity (turn, scale, shift) by iterative closest points, its turn and
+scale refined point to line (matched points slide along the outline, so point to point turns
+too little: against the true tool turn, gain 0.36-0.56 -> 0.62-0.87 for the cube, 0.1 ->
+0.75-0.93 for the nut), the shift then by the matched points. The fitted shift is where the
+whole part's centre lies. A fit is taken only where it is good (RMS distance of
 the points within MAX_RMS_PX, enough points, a scale and a turn the loop can meet near the
 pose); otherwise nothing is moved, and the loop's hidden-part check stops it where it would
 end.
@@ -38,6 +41,7 @@ OUTLINE_POINTS = 120
 # shift moves less than a thousandth of a pixel.
 FIT_POINTS = 200
 ITERATIONS = 20
+REFINE_ITERATIONS = 10
 # A fit is taken where its points lie within this RMS distance of the taught outline, at
 # least MIN_KEPT_SHARE of the taught outline's length shows the table beyond it,
 # and the fitted scale and turn are within these (near the taught pose: the image scale
@@ -183,9 +187,35 @@ def fit_outline(channel: np.ndarray, part_mask: np.ndarray, u_px: float, v_px: f
         rot, scale, shift = _similarity(template[nearest], seen)
         if np.abs(shift - last).max() < 1e-3:
             break
+    # Point to line: matched points may slide along the outline, so a point-to-point fit
+    # turns too little; each point's distance along the taught outline's normal does not.
+    theta = math.atan2(rot[1, 0], rot[0, 0])
+    normals = _outward_normals(template, np.zeros(2))
+    across = np.column_stack([-template[:, 1], template[:, 0]])
+    for _ in range(REFINE_ITERATIONS):
+        rot = np.array([[math.cos(theta), -math.sin(theta)], [math.sin(theta), math.cos(theta)]])
+        placed = scale * template @ rot.T + shift
+        j = gaps(placed).argmin(axis=1)
+        n = normals[j] @ rot.T
+        residual = np.einsum("ij,ij->i", n, placed[j] - seen)
+        jac = np.column_stack([np.einsum("ij,ij->i", n, scale * across[j] @ rot.T),
+                               np.einsum("ij,ij->i", n, template[j] @ rot.T), n])
+        step, *_ = np.linalg.lstsq(jac, -residual, rcond=None)
+        theta += float(step[0])
+        scale += float(step[1])
+        shift = shift + step[2:]
+        if np.abs(step).max() < 1e-4:
+            break
+    rot = np.array([[math.cos(theta), -math.sin(theta)], [math.sin(theta), math.cos(theta)]])
+    for _ in range(ITERATIONS):  # the shift by matched points, the turn and scale kept
+        placed = scale * template @ rot.T
+        last = shift
+        shift = (seen - placed[gaps(placed + shift).argmin(axis=1)]).mean(axis=0)
+        if np.abs(shift - last).max() < 1e-3:
+            break
     closest = gaps(scale * template @ rot.T + shift).min(axis=1)
     rms = float(np.sqrt(np.maximum(closest, 0.0).mean()))
-    turn = math.degrees(math.atan2(rot[1, 0], rot[0, 0]))
+    turn = math.degrees(theta)
     if rms > MAX_RMS_PX or not SCALE_RANGE[0] <= scale <= SCALE_RANGE[1] \
             or abs(turn) > MAX_TURN_DEG:
         return None
