@@ -207,7 +207,7 @@ def _psi(axis: BlobAxis, direction: tuple[float, float]) -> float:
                       direction[0] * au + direction[1] * av)
 
 
-def _table_level(channel: np.ndarray) -> float:
+def table_level(channel: np.ndarray) -> float:
     """The table's level: the median of every fourth pixel each way (the part covers a small
     share of the frame)."""
     return float(np.median(channel[::4, ::4]))
@@ -216,7 +216,7 @@ def _table_level(channel: np.ndarray) -> float:
 def _edges(channel: np.ndarray, axis: BlobAxis, threshold: float
            ) -> tuple[tuple[float, float], tuple[float, float]]:
     """The edge points (u, v) at the low and the high end of ``axis``."""
-    inside = 1.0 if threshold > _table_level(channel) else -1.0
+    inside = 1.0 if threshold > table_level(channel) else -1.0
     (cu, cv_), (au, av) = axis.centre, axis.direction
     low = _edge(channel, axis, axis.low, -1.0, threshold, inside)
     high = _edge(channel, axis, axis.high, 1.0, threshold, inside)
@@ -287,7 +287,7 @@ def hidden_end_shift(channel: np.ndarray, part_mask: np.ndarray, u_px: float, v_
     if abs(math.degrees(psi)) > READ_DEG \
             or axis.length > (1.0 - MIN_HIDDEN_SHARE) * ends.length_px + 1.0:
         return None
-    table = _table_level(channel)
+    table = table_level(channel)
     level = table + BEYOND_SHARE * (threshold - table)
     above = [(b - level) * (threshold - table) > 0.0
              for b in (_beyond(channel, axis, axis.high, 1.0),

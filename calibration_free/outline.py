@@ -30,11 +30,11 @@ from dataclasses import dataclass
 import cv2
 import numpy as np
 
-# An outline point has the table beyond it where the channel 2-6 px out along its normal
-# stands less than this share of the way from the table's level to the part's threshold (a
-# slate card in saturation: 0.7-1.0 of the way in good light, 0.4-0.55 in poor).
-BEYOND_SHARE = 0.3
-BEYOND_PX = (2, 6)
+from calibration_free.ends import BEYOND_PX, BEYOND_SHARE, table_level
+
+# An outline point has the table beyond it by the rule a bar's end has (``ends``): the
+# channel from BEYOND_PX[0] to BEYOND_PX[1] px out along its normal stands less than
+# BEYOND_SHARE of the way from the table's level to the part's threshold.
 # The taught outline keeps at most this many points (every k-th of its contour).
 OUTLINE_POINTS = 120
 # The fit uses at most FIT_POINTS of the points seen and stops after ITERATIONS, or once the
@@ -116,7 +116,7 @@ def _beyond(channel: np.ndarray, points: np.ndarray, normals: np.ndarray) -> np.
 def _table_beyond(channel: np.ndarray, points: np.ndarray, centre: np.ndarray,
                   threshold: float) -> np.ndarray:
     """Which outline points have the table beyond them (module docstring)."""
-    table = float(np.median(channel[::4, ::4]))
+    table = table_level(channel)
     level = table + BEYOND_SHARE * (threshold - table)
     beyond = _beyond(channel, points, _outward_normals(points, centre))
     return (beyond - level) * (threshold - table) <= 0.0
@@ -132,6 +132,12 @@ def cut_share(channel: np.ndarray, part_mask: np.ndarray, u_px: float, v_px: flo
         return 0.0
     return float(1.0 - _table_beyond(channel, points, np.array([u_px, v_px]),
                                      threshold).mean())
+
+
+def _turn(theta_rad: float) -> np.ndarray:
+    """The 2x2 rotation by ``theta_rad`` (image u towards v)."""
+    c, s = math.cos(theta_rad), math.sin(theta_rad)
+    return np.array([[c, -s], [s, c]])
 
 
 def _similarity(src: np.ndarray, dst: np.ndarray) -> tuple[np.ndarray, float, np.ndarray]:
@@ -193,7 +199,7 @@ def fit_outline(channel: np.ndarray, part_mask: np.ndarray, u_px: float, v_px: f
     normals = _outward_normals(template, np.zeros(2))
     across = np.column_stack([-template[:, 1], template[:, 0]])
     for _ in range(REFINE_ITERATIONS):
-        rot = np.array([[math.cos(theta), -math.sin(theta)], [math.sin(theta), math.cos(theta)]])
+        rot = _turn(theta)
         placed = scale * template @ rot.T + shift
         j = gaps(placed).argmin(axis=1)
         n = normals[j] @ rot.T
@@ -206,7 +212,7 @@ def fit_outline(channel: np.ndarray, part_mask: np.ndarray, u_px: float, v_px: f
         shift = shift + step[2:]
         if np.abs(step).max() < 1e-4:
             break
-    rot = np.array([[math.cos(theta), -math.sin(theta)], [math.sin(theta), math.cos(theta)]])
+    rot = _turn(theta)
     for _ in range(ITERATIONS):  # the shift by matched points, the turn and scale kept
         placed = scale * template @ rot.T
         last = shift
@@ -235,8 +241,7 @@ def completed(channel: np.ndarray, part_mask: np.ndarray, fit: OutlineFit,
     an anti-aliased edge, and the mask grown by it. NN2 then reads the turn of a whole part
     instead of a cut one (cube, a quarter hidden, turns within 15 deg: 3.4-3.8 -> 1.4-2.1 deg
     RMS; nut 3.1-5.3 -> 1.5-1.7 deg)."""
-    a = math.radians(fit.turn_deg)
-    rot = np.array([[math.cos(a), -math.sin(a)], [math.sin(a), math.cos(a)]])
+    rot = _turn(math.radians(fit.turn_deg))
     polygon = fit.scale * np.asarray(outline, dtype=np.float64) @ rot.T \
         + np.array([fit.u_px, fit.v_px])
     s = DRAW_SUPERSAMPLE
