@@ -86,6 +86,10 @@ class FrontEnd:
         taught_outline_px: the blob's outline in a frame at the taught pose, about its
             centre (``calibration_free.outline``): a part partly hidden is centred on the
             outline it shows. None: not known (model files written before it).
+        turned_outlines_px: the part's outline turned on the table, as (turn_deg, outline)
+            pairs from the NN2 grid's images (``outline.turned_outlines``): from an angle,
+            a turned part shows other faces. Empty: not known (model files written before
+            them); the taught outline alone is fitted.
     """
 
     frame_height_px: int
@@ -104,18 +108,22 @@ class FrontEnd:
     feature_ceiling: float = 0.0
     taught_area_px: float | None = None
     taught_outline_px: tuple[tuple[float, float], ...] | None = None
+    turned_outlines_px: tuple[tuple[float, tuple[tuple[float, float], ...]], ...] = ()
 
     def __post_init__(self) -> None:
         if self.taught_outline_px is not None:
-            try:
-                outline = tuple((float(u), float(v)) for u, v in self.taught_outline_px)
-            except (TypeError, ValueError):
-                outline = ()
-            if len(outline) < 8 or not all(math.isfinite(u) and math.isfinite(v)
-                                           for u, v in outline):
-                raise ConfigError("front end: taught_outline_px must be 8 or more finite "
-                                  "(u, v) pairs or none")
-            object.__setattr__(self, "taught_outline_px", outline)
+            object.__setattr__(self, "taught_outline_px",
+                               _outline(self.taught_outline_px, "taught_outline_px"))
+        turned = self.turned_outlines_px
+        try:
+            turned = tuple((float(t), o) for t, o in turned)
+        except (TypeError, ValueError):
+            turned = None
+        if turned is None or not all(math.isfinite(t) for t, _ in turned):
+            raise ConfigError("front end: turned_outlines_px must be a list of "
+                              "[turn_deg, outline] pairs")
+        object.__setattr__(self, "turned_outlines_px", tuple(
+            (t, _outline(o, "turned_outlines_px")) for t, o in turned))
         taught = self.taught_area_px
         if taught is not None and (isinstance(taught, bool) or not isinstance(
                 taught, (int, float)) or not 0.0 < taught < math.inf):
@@ -278,6 +286,14 @@ class FrontEnd:
         preprocessed = self.preprocess(image)
         return preprocessed, self.localise(preprocessed, image)
 
+    @property
+    def outlines(self) -> tuple[tuple[tuple[float, float], ...], ...]:
+        """The outlines a part partly hidden is fitted with (``outline.fit_outline``): the
+        taught one first, then the turned ones; empty where none is known."""
+        if self.taught_outline_px is None:
+            return ()
+        return (self.taught_outline_px, *(o for _, o in self.turned_outlines_px))
+
     def seen_share(self, area_px: float) -> float | None:
         """A blob's area over the part's at the taught pose (None where that is not known):
         near 1 where the loop settles on the whole part, lower where something hides part of
@@ -305,14 +321,16 @@ class FrontEnd:
                                  "feature_ceiling": self.feature_ceiling,
                                  "taught_area_px": self.taught_area_px,
                                  "taught_outline_px": None if self.taught_outline_px is None
-                                 else [list(p) for p in self.taught_outline_px]}}
+                                 else [list(p) for p in self.taught_outline_px],
+                                 "turned_outlines_px": [[t, [list(p) for p in o]]
+                                                        for t, o in self.turned_outlines_px]}}
 
     @classmethod
     def from_info(cls, info: Mapping[str, Any]) -> FrontEnd:
         """Inverse of ``to_info``. ``localisation.channel``, ``nominal_uv_px``, ``chroma``,
-        ``feature_floor``, ``feature_ceiling``, ``taught_area_px`` and ``taught_outline_px``
-        may be absent (model files written before they were stored): "max", None, None, 0,
-        0, None and None.
+        ``feature_floor``, ``feature_ceiling``, ``taught_area_px``, ``taught_outline_px`` and
+        ``turned_outlines_px`` may be absent (model files written before they were stored):
+        "max", None, None, 0, 0, None, None and none.
 
         Args:
             info: a model file's JSON (at least ``frame_px``, ``intensity``,
@@ -336,7 +354,20 @@ class FrontEnd:
                    float(loc.get("feature_floor", 0.0)),
                    float(loc.get("feature_ceiling", 0.0)),
                    None if taught is None else float(taught),
-                   loc.get("taught_outline_px"))
+                   loc.get("taught_outline_px"), loc.get("turned_outlines_px", ()))
+
+
+def _outline(points: Any, name: str) -> tuple[tuple[float, float], ...]:
+    """An outline as a tuple of (u, v) floats; ConfigError naming ``name`` unless 8 or more
+    finite pairs."""
+    try:
+        outline = tuple((float(u), float(v)) for u, v in points)
+    except (TypeError, ValueError):
+        outline = ()
+    if len(outline) < 8 or not all(math.isfinite(u) and math.isfinite(v) for u, v in outline):
+        raise ConfigError(f"front end: {name} must hold outlines of 8 or more finite (u, v) "
+                          f"pairs")
+    return outline
 
 
 # The colour preference's tolerance: this many times the largest chromaticity distance seen among

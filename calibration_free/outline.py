@@ -12,10 +12,14 @@ table beyond: a similarity (turn, scale, shift) by iterative closest points, its
 scale refined point to line (matched points slide along the outline, so point to point turns
 too little: against the true tool turn, gain 0.36-0.56 -> 0.62-0.87 for the cube, 0.1 ->
 0.75-0.93 for the nut), the shift then by the matched points. The fitted shift is where the
-whole part's centre lies. A fit is taken only where it is good (RMS distance of
-the points within MAX_RMS_PX, enough points, a scale and a turn the loop can meet near the
-pose); otherwise nothing is moved, and the loop's hidden-part check stops it where it would
-end.
+whole part's centre lies. The camera looks at a tilt, so a part turned on the table shows
+other side faces, and its outline is no turned copy of the taught one (a cube turned 40 deg:
+1.2-1.7 px RMS from the best turned copy, no fit): training also keeps the outlines of the
+NN2 grid's images at turns across the symmetry period (``turned_outlines``), and the fit
+starts from each and goes on from the one nearest the points seen. A fit is taken only
+where it is good (RMS distance of the points within MAX_RMS_PX, enough points, a scale and a
+turn the loop can meet near the pose); otherwise nothing is moved, and the loop's
+hidden-part check stops it where it would end.
 
 Measured on the simulated cell (a card over a quarter of the cube in the camera's view, 30
 poses within 3 mm and 3 deg of the taught pose, either end): the blob's centre 4.5 / 6.2 px
@@ -25,7 +29,8 @@ RMS off the whole part's, the fitted one 0.6 / 0.8 px.
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass
+from collections.abc import Sequence
+from dataclasses import dataclass, field
 
 import cv2
 import numpy as np
@@ -38,10 +43,16 @@ from calibration_free.ends import BEYOND_PX, BEYOND_SHARE, table_level
 # The taught outline keeps at most this many points (every k-th of its contour).
 OUTLINE_POINTS = 120
 # The fit uses at most FIT_POINTS of the points seen and stops after ITERATIONS, or once the
-# shift moves less than a thousandth of a pixel.
+# shift moves less than a thousandth of a pixel; with several outlines it first runs
+# START_ITERATIONS from each.
 FIT_POINTS = 200
 ITERATIONS = 20
 REFINE_ITERATIONS = 10
+START_ITERATIONS = 4
+# Training keeps outlines of the part turned at least TURN_STEP_DEG (tool) apart, at most
+# MAX_TURNED of them: spread wider over a longer symmetry period.
+TURN_STEP_DEG = 10.0
+MAX_TURNED = 12
 # A fit is taken where its points lie within this RMS distance of the taught outline, at
 # least MIN_KEPT_SHARE of the taught outline's length shows the table beyond it,
 # and the fitted scale and turn are within these (near the taught pose: the image scale
@@ -57,9 +68,10 @@ MIN_CUT_SHARE = 0.1
 
 @dataclass(frozen=True)
 class OutlineFit:
-    """Where the taught outline fits the part's edges that show: the whole part's centre
-    (``u_px``, ``v_px``), the fit's turn (image deg) and scale, its RMS distance (px) and how
-    many outline points it used."""
+    """Where a taught outline fits the part's edges that show: the whole part's centre
+    (``u_px``, ``v_px``), the fit's turn (image deg, from the outline's) and scale, its RMS
+    distance (px), how many outline points it used, and the outline it fitted (one of
+    those given to ``fit_outline``)."""
 
     u_px: float
     v_px: float
@@ -67,6 +79,7 @@ class OutlineFit:
     scale: float
     rms_px: float
     points: int
+    outline: tuple[tuple[float, float], ...] = field(default=(), repr=False, compare=False)
 
 
 def contour(mask: np.ndarray) -> np.ndarray | None:
@@ -88,6 +101,29 @@ def taught_outline(part_mask: np.ndarray, u_px: float, v_px: float
         return None
     points = points[::max(1, math.ceil(len(points) / OUTLINE_POINTS))]
     return tuple((float(u - u_px), float(v - v_px)) for u, v in points)
+
+
+def turned_outlines(turns_deg: Sequence[float],
+                    outlines: Sequence[tuple[tuple[float, float], ...] | None]
+                    ) -> tuple[tuple[float, tuple[tuple[float, float], ...]], ...]:
+    """Which of the training images' outlines (``taught_outline`` of each, None where the part
+    was not found) to keep, by the part's turn in each (tool deg from the taught pose): one
+    nearest each step of TURN_STEP_DEG (or a wider step, for at most MAX_TURNED) over the
+    turns' range, leaving out the taught heading (the taught outline's)."""
+    have = [(float(t), o) for t, o in zip(turns_deg, outlines, strict=True) if o is not None]
+    if not have:
+        return ()
+    lo = min(t for t, _ in have)
+    hi = max(t for t, _ in have)
+    step = max(TURN_STEP_DEG, (hi - lo) / MAX_TURNED)
+    kept = []
+    for k in range(math.ceil(lo / step - 0.5), math.floor(hi / step + 0.5) + 1):
+        if k == 0:
+            continue
+        turn, outline = min(have, key=lambda item: abs(item[0] - k * step))
+        if abs(turn - k * step) <= step / 2.0:
+            kept.append((turn, outline))
+    return tuple(kept)
 
 
 def _outward_normals(points: np.ndarray, centre: np.ndarray) -> np.ndarray:
@@ -153,7 +189,7 @@ def _similarity(src: np.ndarray, dst: np.ndarray) -> tuple[np.ndarray, float, np
 
 
 def fit_outline(channel: np.ndarray, part_mask: np.ndarray, u_px: float, v_px: float,
-                outline: tuple[tuple[float, float], ...], threshold: float
+                outlines: Sequence[tuple[tuple[float, float], ...]], threshold: float
                 ) -> OutlineFit | None:
     """Where the part's centre lies, from the outline points with the table beyond them;
     None where no good fit is found (module docstring).
@@ -161,13 +197,15 @@ def fit_outline(channel: np.ndarray, part_mask: np.ndarray, u_px: float, v_px: f
     Args:
         channel: the localisation channel the blob was found in (the normalised frame).
         part_mask: the full-frame mask of the part's blob (``Localisation.part_mask``).
-        u_px, v_px: the blob's centre (the fit starts from the taught outline there).
-        outline: the taught outline about its centre (``taught_outline``).
+        u_px, v_px: the blob's centre (the fit starts from the taught outlines there).
+        outlines: taught outlines, each about its part's centre (``taught_outline``): the
+            one at the taught pose, and the part turned (``turned_outlines``).
         threshold: the part's threshold in ``channel``.
     """
     points = contour(part_mask)
-    template = np.asarray(outline, dtype=np.float64)
-    if points is None or len(points) < 8 or len(template) < 8:
+    templates = [np.asarray(o, dtype=np.float64) for o in outlines]
+    templates = [t for t in templates if len(t) >= 8]
+    if points is None or len(points) < 8 or not templates:
         return None
     centre = np.array([u_px, v_px])
     table_beyond = _table_beyond(channel, points, centre, threshold)
@@ -176,8 +214,8 @@ def fit_outline(channel: np.ndarray, part_mask: np.ndarray, u_px: float, v_px: f
     seen = points[table_beyond]
     # the contour's points are a pixel apart, the taught outline's a few: compare the points
     # seen with the taught outline's length
-    perimeter = float(np.linalg.norm(np.diff(template, axis=0, append=template[:1]),
-                                     axis=1).sum())
+    perimeter = float(np.linalg.norm(np.diff(templates[0], axis=0,
+                                             append=templates[0][:1]), axis=1).sum())
     if len(seen) < MIN_KEPT_SHARE * perimeter:
         return None
     seen = seen[::max(1, math.ceil(len(seen) / FIT_POINTS))]
@@ -186,13 +224,25 @@ def fit_outline(channel: np.ndarray, part_mask: np.ndarray, u_px: float, v_px: f
     def gaps(placed: np.ndarray) -> np.ndarray:  # squared distances, seen x placed
         return seen_sq + (placed * placed).sum(axis=1)[None, :] - 2.0 * seen @ placed.T
 
-    rot, scale, shift = np.eye(2), 1.0, centre.copy()
-    for _ in range(ITERATIONS):
-        last = shift
-        nearest = gaps(scale * template @ rot.T + shift).argmin(axis=1)
-        rot, scale, shift = _similarity(template[nearest], seen)
-        if np.abs(shift - last).max() < 1e-3:
-            break
+    def icp(template: np.ndarray, rot: np.ndarray, scale: float, shift: np.ndarray,
+            iterations: int) -> tuple[np.ndarray, float, np.ndarray, float]:
+        """Point-to-point steps from a fit; the fit and its mean squared gap."""
+        for _ in range(iterations):
+            last = shift
+            nearest = gaps(scale * template @ rot.T + shift).argmin(axis=1)
+            rot, scale, shift = _similarity(template[nearest], seen)
+            if np.abs(shift - last).max() < 1e-3:
+                break
+        gap = float(gaps(scale * template @ rot.T + shift).min(axis=1).mean())
+        return rot, scale, shift, gap
+
+    start = (np.eye(2), 1.0, centre.copy())
+    template = templates[0]
+    if len(templates) > 1:  # a few steps from each outline, then on from the nearest
+        starts = [(t, icp(t, *start, START_ITERATIONS)) for t in templates]
+        template, fit = min(starts, key=lambda item: item[1][3])
+        start = fit[:3]
+    rot, scale, shift, _ = icp(template, *start, ITERATIONS)
     # Point to line: matched points may slide along the outline, so a point-to-point fit
     # turns too little; each point's distance along the taught outline's normal does not.
     theta = math.atan2(rot[1, 0], rot[0, 0])
@@ -225,7 +275,8 @@ def fit_outline(channel: np.ndarray, part_mask: np.ndarray, u_px: float, v_px: f
     if rms > MAX_RMS_PX or not SCALE_RANGE[0] <= scale <= SCALE_RANGE[1] \
             or abs(turn) > MAX_TURN_DEG:
         return None
-    return OutlineFit(float(shift[0]), float(shift[1]), turn, scale, rms, len(seen))
+    return OutlineFit(float(shift[0]), float(shift[1]), turn, scale, rms, len(seen),
+                      tuple((float(u), float(v)) for u, v in template))
 
 
 # The hidden part is drawn at this many times the frame's resolution, then averaged down: its
@@ -233,16 +284,15 @@ def fit_outline(channel: np.ndarray, part_mask: np.ndarray, u_px: float, v_px: f
 DRAW_SUPERSAMPLE = 4
 
 
-def completed(channel: np.ndarray, part_mask: np.ndarray, fit: OutlineFit,
-              outline: tuple[tuple[float, float], ...], level: float
+def completed(channel: np.ndarray, part_mask: np.ndarray, fit: OutlineFit, level: float
               ) -> tuple[np.ndarray, np.ndarray]:
     """The frame and the part's mask with the hidden part drawn in where the fit puts the
-    taught outline: the channel raised to ``level`` (the features' ceiling) inside it, with
+    outline it fitted: the channel raised to ``level`` (the features' ceiling) inside it, with
     an anti-aliased edge, and the mask grown by it. NN2 then reads the turn of a whole part
     instead of a cut one (cube, a quarter hidden, turns within 15 deg: 3.4-3.8 -> 1.4-2.1 deg
     RMS; nut 3.1-5.3 -> 1.5-1.7 deg)."""
     rot = _turn(math.radians(fit.turn_deg))
-    polygon = fit.scale * np.asarray(outline, dtype=np.float64) @ rot.T \
+    polygon = fit.scale * np.asarray(fit.outline, dtype=np.float64) @ rot.T \
         + np.array([fit.u_px, fit.v_px])
     s = DRAW_SUPERSAMPLE
     height, width = channel.shape

@@ -24,8 +24,11 @@ from calibration_free.localise import Localisation
 from calibration_free.outline import OutlineFit, completed, fit_outline
 
 # A part seen this share smaller than at the taught pose is centred on the outline it shows
-# (``calibration_free.outline``); the loop's hidden-part check uses the same share.
-OUTLINE_BELOW = 0.1
+# where something lies against it (``calibration_free.outline``). Well below the loop's
+# hidden-part check (``controller.loop.hidden_check_share``): a bar's centre moves by
+# millimetres for a few per cent hidden, and a gate the hidden share straddles from one pose
+# to the next made the loop step back and forth between the two.
+OUTLINE_BELOW = 0.03
 
 
 @dataclass(frozen=True)
@@ -151,9 +154,9 @@ class Perception:
         hidden_share, fit = None, None
         share = self._front.seen_share(loc.area_px)
         if hidden_px is None and share is not None and share < 1.0 - OUTLINE_BELOW \
-                and self._front.taught_outline_px is not None:
+                and self._front.outlines:
             fit = fit_outline(normalised, loc.part_mask, loc.u_px, loc.v_px,
-                              self._front.taught_outline_px, self._front.threshold)
+                              self._front.outlines, self._front.threshold)
             if fit is not None:
                 centre, hidden_share = (fit.u_px, fit.v_px), 1.0 - share
             t_outline = clock()
@@ -185,7 +188,7 @@ class Perception:
         fit = percept.outline_fit
         if fit is not None and self._front.feature_ceiling:
             # the features see the part with its hidden part drawn in, centred on it
-            frame, mask = completed(frame, loc.part_mask, fit, self._front.taught_outline_px,
+            frame, mask = completed(frame, loc.part_mask, fit,
                                     self._front.feature_ceiling * self._front.threshold)
             seen = dataclasses.replace(loc, u_px=fit.u_px, v_px=fit.v_px, part_mask=mask)
         roi = self._front.feature_roi(frame, seen, self._roi_px)

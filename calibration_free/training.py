@@ -38,7 +38,7 @@ from calibration_free.localise import (
     otsu_threshold,
 )
 from calibration_free.mlp import TrainedMLP, train_mlp
-from calibration_free.outline import taught_outline
+from calibration_free.outline import taught_outline, turned_outlines
 from calibration_free.preprocess import (
     Channel,
     IntensityStats,
@@ -248,12 +248,20 @@ def prepare_training(sets: dict[str, Dataset], polarity: Polarity = "bright",
     taught = [loc.area_px for loc in at_pose]
     outline = (taught_outline(at_pose[0].part_mask, at_pose[0].u_px, at_pose[0].v_px)
                if at_pose else None)
+    # ... and turned: the NN2 grid's images turn the part over its symmetry period
+    turned = ()
+    if outline is not None and "nn2" in sets:
+        nn2 = found["nn2"]
+        turned = turned_outlines(
+            sets["nn2"].labels[usable["nn2"], 2],
+            [taught_outline(nn2[i].part_mask, nn2[i].u_px, nn2[i].v_px)
+             for i in usable["nn2"]])
     front = FrontEnd(height, width, intensity, threshold, polarity, expected_area, tolerance,
                      max_elongation, channel, chroma=chroma, chroma_tolerance=chroma_tolerance,
                      feature_floor=FEATURE_FLOOR if channel == "saturation" else 0.0,
                      feature_ceiling=FEATURE_CEILING if channel == "saturation" else 0.0,
                      taught_area_px=float(np.mean(taught)) if taught else None,
-                     taught_outline_px=outline)
+                     taught_outline_px=outline, turned_outlines_px=turned)
     return PreparedSets(front, located, found, usable, time.perf_counter() - start)
 
 

@@ -120,7 +120,8 @@ def test_a_file_in_the_version_4_layout_loads_and_is_still_written(bundle, cell,
     assert old.front.chroma is None and bundle.front.chroma is not None
     assert old.front.taught_area_px is None and bundle.front.taught_area_px is not None
     assert old.front == dataclasses.replace(bundle.front, chroma=None, chroma_tolerance=0.0,
-                                            taught_area_px=None, taught_outline_px=None)
+                                            taught_area_px=None, taught_outline_px=None,
+                                            turned_outlines_px=())
     assert old.training == {"seed": 0}
     # no near net: every look's translation is nn1_rot's, as version 4 perceived
     assert old.near_mm == 0.0 and old.format_version == 4
@@ -140,7 +141,10 @@ def test_a_file_in_the_version_4_layout_loads_and_is_still_written(bundle, cell,
                                        "feature_ceiling": bundle.front.feature_ceiling,
                                        "taught_area_px": bundle.front.taught_area_px,
                                        "taught_outline_px": [
-                                           list(p) for p in bundle.front.taught_outline_px]}
+                                           list(p) for p in bundle.front.taught_outline_px],
+                                       "turned_outlines_px": [
+                                           [t, [list(p) for p in o]]
+                                           for t, o in bundle.front.turned_outlines_px]}
     assert written["frame_px"] == expected["frame_px"]
     assert written["intensity"] == expected["intensity"]
 
