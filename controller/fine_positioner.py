@@ -9,6 +9,7 @@ one for its lifetime. Files live in its state folder, the part's folder under
 
 from __future__ import annotations
 
+import dataclasses
 import logging
 import math
 from pathlib import Path
@@ -16,6 +17,7 @@ from pathlib import Path
 import numpy as np
 
 from calibration_free.dataset import Dataset
+from calibration_free.rezero import rezero
 from controller.loop.grasp import GraspResult, guarded_grasp
 from controller.loop.iteration_log import IterationLog
 from controller.loop.positioning import PositioningLoop, PositioningResult
@@ -28,6 +30,9 @@ from drivers.core.errors import FineposError
 from drivers.core.pose import Pose
 
 logger = logging.getLogger(__name__)
+
+# Frames ``rezero`` takes at the taught pose (training pinned the nets on 4 + 4).
+REZERO_FRAMES = 8
 
 DATASETS = ("nn1", "nn2", "test")
 
@@ -195,6 +200,31 @@ class FinePositioner:
             raise FineposError(f"{file}: no trained {system} model; run `{train}` first")
         self._model = SYSTEMS[system].load(file, state)
         return self._model
+
+    def rezero(self, frames: int = REZERO_FRAMES) -> tuple[TrainedModel, dict]:
+        """Re-zero the part's Gabor model in the cell's light (``calibration_free.rezero``):
+        move to the taught pose, take ``frames`` frames, shift the translation nets to read
+        zero there, store the model (atomically) and use it. The part must lie where it was
+        taught.
+
+        Returns:
+            The model and what moved (``Rezeroed.report``: each net's reading before, mm).
+
+        Raises:
+            FineposError: no gabor model stored, or ``frames`` below 1.
+            TrainingError: the part is not seen whole there, or not where it was taught (the
+                model file is left as it was).
+        """
+        if isinstance(frames, bool) or not isinstance(frames, int) or frames < 1:
+            raise FineposError(f"rezero: frames must be a whole number >= 1, got {frames!r}")
+        model = self.load_model(system="gabor")
+        self.move_to(self.state().nominal_pose)
+        done = rezero(model.model, [self.devices.camera.grab().image for _ in range(frames)])
+        model = dataclasses.replace(model, model=done.bundle)
+        SYSTEMS["gabor"].save(model, self.model_path("gabor"))
+        self._model = model
+        logger.info("re-zeroed %s: %s", self.model_path("gabor"), done.report()["shift_mm"])
+        return model, done.report()
 
     def use_model(self, model: TrainedModel) -> None:
         """Use an already trained or loaded model for the next positioning runs."""

@@ -29,6 +29,8 @@ LEAVES = {
               "(--auto: simulated cell; otherwise the arm's current pose)"),
     "acquire": ("finepos ctl acquire --set nn1 --part nut", "take a training or test set"),
     "train": ("finepos ctl train --system gabor --part nut", "train a model from nn1 and nn2"),
+    "rezero": ("finepos ctl rezero --part nut", "re-zero a part's model at the taught pose "
+               "in the cell's light (the part where it was taught)"),
     "position": ("finepos ctl position --offset 12,-8,20 --part nut",
                  "run the positioning loop"),
     "grasp": ("finepos ctl grasp --part nut", "force-guarded grasp from the current pose"),

@@ -23,6 +23,12 @@ one Markdown table (safe rates after 1.5 and 2.5 loops with 95% Wilson intervals
 1.5, 2.5 and 3.5 loops, loops to safe) instead of the JSON report; --json writes every row's
 report; --workers runs the trials in parallel processes.
 
+Also: finepos evaluate --part all --lighting poor --rezero --trials 50
+
+--rezero: after training (or --model), re-zero the model at the taught pose in the trials'
+light, as `finepos rezero` does on a cell whose light changed, then run the trials (the report's
+rezero: what each translation net read there before, mm).
+
 Also: finepos evaluate --mounts 10 --trials 50 --json out/mounts.json
 
 --mounts N: N random cameras (mount tilt +/-8 deg, roll and pan +/-4 deg, offset +/-5 mm, field
@@ -60,6 +66,10 @@ from drivers.core.files import atomic_write_text, write_json
 def run(args) -> int:
     """Run ``trials.evaluate`` with the options and print the JSON report (also to ``--json``)."""
     config = run_config_from_args(args)
+    if args.rezero and args.system != "gabor":
+        raise ConfigError(f"--rezero: only with --system gabor, not {args.system}")
+    if args.rezero and args.mounts is not None:
+        raise ConfigError("--rezero: not with --mounts (each camera is trained on its own)")
     if args.part == ALL_PARTS:
         return _evaluate_parts(args, config)
     if args.workers != 1:
@@ -72,7 +82,7 @@ def run(args) -> int:
             report = evaluate(args.system, config, trials=args.trials, seed=args.seed,
                               lighting=args.lighting, model_path=args.model,
                               grasp=not args.no_grasp, log=log, progress=not args.quiet,
-                              hil=args.hil, recorder=recorder)
+                              hil=args.hil, recorder=recorder, rezero=args.rezero)
     finally:
         if log:
             log.close()
@@ -95,7 +105,7 @@ def _evaluate_parts(args, config) -> int:
     lightings = (args.lighting,) if args.lighting else ("good", "poor")
     report = run_parts_table(config, system=args.system, trials=args.trials, seed=args.seed,
                              lightings=lightings, grasp=not args.no_grasp, workers=args.workers,
-                             progress=not args.quiet)
+                             progress=not args.quiet, rezero=args.rezero)
     if args.json:
         atomic_write_text(args.json, json.dumps(report, indent=2) + "\n")
         print(f"report: {args.json}", file=sys.stderr)
@@ -140,6 +150,9 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--record-trials", type=positive_int, default=3, metavar="N",
                         help="how many trials --record keeps (default 3)")
     parser.add_argument("--no-grasp", action="store_true", help="skip the grasp after positioning")
+    parser.add_argument("--rezero", action="store_true",
+                        help="first re-zero the model at the taught pose in the trials' light "
+                             "(finepos rezero; gabor only)")
     parser.add_argument("--quiet", action="store_true", help="no progress bars")
     parser.add_argument("--workers", type=positive_int, default=1,
                         help="--part all: parallel processes for the trials (default 1)")

@@ -1,4 +1,5 @@
-"""``finepos teach | acquire | train | position | grasp``: the cell's workflow, step by step.
+"""``finepos teach | acquire | train | rezero | position | grasp``: the cell's workflow, step by
+step.
 
 Each works on one part (``--part``, see ``common.part_setup``), in that part's folder under the
 state folder (``controller.teach.state_folder``).
@@ -23,7 +24,7 @@ from controller.commands.common import (
 )
 from controller.commands.device_options import add_device_options, apply_device_options
 from controller.devices import open_devices
-from controller.fine_positioner import DATASETS, FinePositioner
+from controller.fine_positioner import DATASETS, REZERO_FRAMES, FinePositioner
 from controller.teach.spacenav import DEFAULT_SIM_START_OFFSET, TeachAborted, teach_with_spacenav
 from drivers.core.errors import ConfigError
 from drivers.core.files import write_json
@@ -94,6 +95,17 @@ def cmd_train(args) -> int:
     return 0
 
 
+def cmd_rezero(args) -> int:
+    """Re-zero the part's Gabor model at the taught pose in the cell's light; print the shift."""
+    config, state_dir = _config(args)
+    with open_devices(config) as devices:
+        fp = FinePositioner(devices, config, state_dir=state_dir)
+        _, report = fp.rezero(args.frames)
+    write_json(None, {"part": config.controller.part, "model": str(fp.model_path("gabor")),
+                      **report})
+    return 0
+
+
 def cmd_position(args) -> int:
     """Run the positioning loop (then ``--grasp``); 1 unless it converged or used its budget.
 
@@ -143,7 +155,7 @@ def cmd_grasp(args) -> int:
 
 
 def register(subparsers) -> None:
-    """Add ``finepos teach``, ``acquire``, ``train``, ``position`` and ``grasp``."""
+    """Add ``finepos teach``, ``acquire``, ``train``, ``rezero``, ``position`` and ``grasp``."""
     p = add_command(
         subparsers, "teach",
         help="record the nominal grasp pose into the cell's state file",
@@ -202,6 +214,22 @@ def register(subparsers) -> None:
     add_part_option(p, TAUGHT_PART_HELP)
     add_system_option(p)
     p.set_defaults(func=cmd_train)
+
+    p = add_command(
+        subparsers, "rezero",
+        help="re-zero the part's model at the taught pose in the cell's light",
+        description="Example: finepos rezero\n\nAfter the light changed (a lamp moved, the "
+                    "room dimmed): with the part where it was taught, move to the taught "
+                    "pose, take --frames frames and shift the translation nets to read zero "
+                    "there (the Gabor model in the part's state folder, rewritten "
+                    "atomically; no new acquisition). A reading over 1 mm there is refused: "
+                    "the part is not where it was taught, or the camera moved.")
+    add_config_option(p)
+    add_device_options(p)
+    add_part_option(p, TAUGHT_PART_HELP)
+    p.add_argument("--frames", type=int, default=REZERO_FRAMES,
+                   help=f"frames at the taught pose (default {REZERO_FRAMES})")
+    p.set_defaults(func=cmd_rezero)
 
     p = add_command(
         subparsers, "position",

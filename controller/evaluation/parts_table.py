@@ -23,6 +23,7 @@ from controller.evaluation.comparison.pools import Tick, open_pool
 from controller.evaluation.metrics import SAFE_DEG, SAFE_MM
 from controller.evaluation.trials import (
     build_report,
+    rezeroed_on,
     run_trials,
     train_on_default_scene,
     with_lighting,
@@ -50,6 +51,7 @@ class _TrialsJob:
     trials: int
     seed: int
     grasp: bool
+    rezero: bool = False
 
 
 def _eval_config(config, lighting: str):
@@ -58,16 +60,21 @@ def _eval_config(config, lighting: str):
 
 
 def _run_trials_job(job: _TrialsJob, tick: Tick) -> dict:
+    config = _eval_config(job.config, job.lighting)
     with tempfile.TemporaryDirectory(prefix="finepos-parts-") as tmp:
-        return run_trials(job.system, job.model, _eval_config(job.config, job.lighting),
-                          job.trials, job.seed, work_dir=Path(tmp), grasp=job.grasp,
-                          progress=False, on_trial=tick)
+        model, rezero = job.model, None
+        if job.rezero:
+            model, rezero = rezeroed_on(model, config, Path(tmp) / "rezero", job.seed)
+        run = run_trials(job.system, model, config, job.trials, job.seed,
+                         work_dir=Path(tmp) / "eval", grasp=job.grasp, progress=False,
+                         on_trial=tick)
+    return {**run, "rezero": rezero}
 
 
 def run_parts_table(config, *, system: str = "gabor", trials: int, seed: int,
                     part_names: tuple[str, ...] = tuple(parts.PARTS),
                     lightings: tuple[str, ...] = LIGHTINGS, grasp: bool = True,
-                    workers: int = 1, progress: bool = True) -> dict:
+                    workers: int = 1, progress: bool = True, rezero: bool = False) -> dict:
     """Train each part once, run every (part, lighting) pair's trials; the JSON report.
 
     Args:
@@ -81,6 +88,8 @@ def run_parts_table(config, *, system: str = "gabor", trials: int, seed: int,
         grasp: grasp after each positioning run (gives the grasp success rate).
         workers: parallel processes for the trials (1: all in this process).
         progress: show progress bars.
+        rezero: re-zero each part's model in each pair's light before its trials
+            (``trials.rezeroed_on``; each row's ``rezero`` says what moved).
 
     Returns:
         ``{"system", "trials", "seed", "wall_seconds", "rows": [...]}``: one ``finepos
@@ -101,7 +110,8 @@ def run_parts_table(config, *, system: str = "gabor", trials: int, seed: int,
             logger.info("parts table: teach-in, acquisition and training on the %s", kind)
             models[kind], acquisitions[kind] = train_on_default_scene(
                 system, configs[kind], Path(tmp) / kind, seed, progress)
-    jobs = [_TrialsJob(kind, light, system, models[kind], configs[kind], trials, seed, grasp)
+    jobs = [_TrialsJob(kind, light, system, models[kind], configs[kind], trials, seed, grasp,
+                       rezero)
             for kind in part_names for light in lightings]
     with open_pool(min(workers, len(jobs))) as pool:
         runs = pool.run(_run_trials_job, jobs, weights=[trials] * len(jobs), desc="parts",
@@ -113,6 +123,7 @@ def run_parts_table(config, *, system: str = "gabor", trials: int, seed: int,
                               acquisition=acquisitions[job.part], run=run)
         report.pop("_trial_states")
         report["hil"] = False
+        report["rezero"] = run["rezero"]
         rows.append({"part": job.part, "kappa": run["kappa"], **report})
     wall = time.perf_counter() - t0
     logger.info("parts table: %d parts x %d lightings x %d trials in %.1f s", len(part_names),

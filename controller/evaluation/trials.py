@@ -96,6 +96,24 @@ def train_systems_on_default_scene(systems: Sequence[str], config, work_dir: Pat
     return models, {"acquire_seconds": acquire_seconds, "images": len(nn1) + len(nn2)}
 
 
+def rezeroed_on(model: TrainedModel, config, work_dir: Path, seed: int, hil: bool = False
+                ) -> tuple[TrainedModel, dict]:
+    """The model re-zeroed (``FinePositioner.rezero``) on ``config``'s cell, in its light:
+    the part where the scene puts it, the arm at its true grasp pose (``teach_auto``).
+
+    Raises:
+        FineposError: ``model`` is not a Gabor model (only its translation nets re-zero).
+        TrainingError: the part is not seen whole there (``calibration_free.rezero``).
+    """
+    if model.system != "gabor":
+        raise FineposError(f"--rezero: only the gabor system re-zeroes, not {model.system}")
+    with device_opener(hil)(config, seed=seed) as devices:
+        fp = FinePositioner(devices, config, state_dir=work_dir)
+        fp.teach_auto()
+        SYSTEMS["gabor"].save(model, fp.model_path("gabor"))
+        return fp.rezero()
+
+
 def run_trials(system: str, model: TrainedModel, config, trials: int, seed: int, *,
                work_dir: Path, grasp: bool = True, log=None, progress: bool = True,
                budget: float = EVAL_BUDGET, on_trial: Callable[[], None] | None = None,
@@ -205,10 +223,11 @@ def cell_kind(config) -> str:
 def evaluate(system: str, config, *, trials: int, seed: int, lighting: str | None = None,
              model_path: str | Path | None = None, work_dir: str | Path | None = None,
              grasp: bool = True, log=None, progress: bool = True, hil: bool = False,
-             recorder=None) -> dict:
+             recorder=None, rezero: bool = False) -> dict:
     """The ``finepos evaluate`` report (see the README for its fields); ``hil``: through the
     real drivers and the device emulators (see the module docstring); ``recorder``: records
-    the trials' looks (see ``run_trials``)."""
+    the trials' looks (see ``run_trials``); ``rezero``: the model is first re-zeroed in the
+    trials' light (``rezeroed_on``; the report's ``rezero`` says what moved)."""
     if system not in SYSTEMS:
         raise FineposError(f"unknown system {system!r} (one of {', '.join(SYSTEMS)})")
     eval_cfg = with_test_camera(with_lighting(config, lighting))
@@ -224,11 +243,15 @@ def evaluate(system: str, config, *, trials: int, seed: int, lighting: str | Non
         else:
             model, acquisition = train_on_default_scene(system, config, work / "train", seed,
                                                         progress, hil)
+        rezero_report = None
+        if rezero:
+            model, rezero_report = rezeroed_on(model, eval_cfg, work / "rezero", seed, hil)
         run = run_trials(system, model, eval_cfg, trials, seed, work_dir=work / "eval",
                          grasp=grasp, log=log, progress=progress, hil=hil, recorder=recorder)
     report = build_report(system, config, eval_cfg, trials=trials, seed=seed, model=model,
                           acquisition=acquisition, run=run)
     report["hil"] = hil
+    report["rezero"] = rezero_report
     return report
 
 

@@ -60,6 +60,11 @@ COMMANDS: dict[str, dict[str, Arg]] = {
         "system": Arg(str, "gabor", choices=tuple(SYSTEMS), help="vision system"),
         "wait": WAIT,
     },
+    "rezero": {
+        "part": PART,
+        "frames": Arg(int, 8, 1, 100, help="frames at the taught pose"),
+        "wait": WAIT,
+    },
     "position": {
         "part": PART,
         "max_loops": Arg(float, None, 0.5, 1000.0, help="loop budget (default from config)"),
@@ -81,7 +86,7 @@ COMMANDS: dict[str, dict[str, Arg]] = {
     "auth": {"token": Arg(str, REQUIRED, max_chars=1024, help="the TCP listener's token")},
 }
 
-JOB_COMMANDS = ("teach", "acquire", "train", "position", "grasp")
+JOB_COMMANDS = ("teach", "acquire", "train", "rezero", "position", "grasp")
 
 
 def _number(name: str, value: Any, kind: type, low: float | None, high: float | None) -> float:

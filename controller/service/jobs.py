@@ -121,6 +121,12 @@ def _train(ctx: JobContext) -> dict[str, Any]:
             "train_images": model.train_images, "train_seconds": model.train_seconds}
 
 
+def _rezero(ctx: JobContext) -> dict[str, Any]:
+    model, report = ctx.fp.rezero(ctx.args["frames"])
+    ctx.models.set(model, ctx.fp.model_path("gabor"))
+    return {"part": ctx.part, "model": str(ctx.fp.model_path("gabor")), **report}
+
+
 def _position(ctx: JobContext) -> dict[str, Any]:
     fp, args = ctx.fp, ctx.args
     fp.use_model(ctx.models.require(fp))
@@ -149,6 +155,7 @@ BODIES: dict[str, Callable[[JobContext], dict[str, Any]]] = {
     "teach": _teach,
     "acquire": _acquire,
     "train": _train,
+    "rezero": _rezero,
     "position": _position,
     "grasp": _grasp,
 }

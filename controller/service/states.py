@@ -1,7 +1,7 @@
 """The service's state machine: one state at a time, the transitions allowed between them.
 
 starting -> idle once the devices are open (fault when they cannot be opened);
-idle -> teaching | acquiring | training | positioning | grasping: one job at a time;
+idle -> teaching | acquiring | training | rezeroing | positioning | grasping: one job at a time;
 a job -> idle when it ends (done, failed or aborted), -> fault on a device error;
 fault -> idle only through an accepted ``reset``; any state -> stopping on shutdown.
 """
@@ -24,6 +24,7 @@ class State(enum.Enum):
     TEACHING = "teaching"
     ACQUIRING = "acquiring"
     TRAINING = "training"
+    REZEROING = "rezeroing"
     POSITIONING = "positioning"
     GRASPING = "grasping"
     FAULT = "fault"
@@ -34,6 +35,7 @@ JOB_STATES: dict[str, State] = {
     "teach": State.TEACHING,
     "acquire": State.ACQUIRING,
     "train": State.TRAINING,
+    "rezero": State.REZEROING,
     "position": State.POSITIONING,
     "grasp": State.GRASPING,
 }

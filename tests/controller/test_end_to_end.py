@@ -90,3 +90,32 @@ def test_counts_and_budgets_are_checked_before_anything_runs(argv, message, caps
     with pytest.raises(SystemExit) as info:
         main(argv)
     assert info.value.code == 2 and message in capsys.readouterr().err
+
+
+def test_cli_rezero_moves_the_zero_to_the_new_light_and_refuses_a_moved_part(trained,
+                                                                              tmp_path,
+                                                                              capsys):
+    """Trained in good light, the cube's nets read a few tenths of a millimetre at the taught
+    pose under the poor-light preset; `finepos rezero` there makes them read zero, and with
+    the part moved 4 mm it changes nothing."""
+    import shutil
+
+    state = tmp_path / "state"
+    shutil.copytree(trained, state)
+    poor = tmp_path / "poor.yaml"
+    poor.write_text("scene:\n  lighting:\n    preset: poor\n")
+    model = state / "model-gabor.fpm"
+    assert main(["rezero", "--state-dir", str(state), "--config", str(poor)]) == 0
+    out = json.loads(capsys.readouterr().out)
+    assert out["part"] == "cube" and out["model"] == str(model) and out["frames_used"] == 8
+    assert 0.1 < math.hypot(*out["shift_mm"]["nn1"]) < 1.0, out
+    assert main(["rezero", "--state-dir", str(state), "--config", str(poor)]) == 0
+    again = json.loads(capsys.readouterr().out)
+    assert math.hypot(*again["shift_mm"]["nn1"]) < 0.05, again  # it reads zero there now
+    written = model.read_bytes()
+    moved = tmp_path / "moved.yaml"
+    moved.write_text("scene:\n  lighting:\n    preset: poor\n  object:\n    x_mm: 304.0\n")
+    assert main(["rezero", "--state-dir", str(state), "--config", str(moved)]) != 0
+    err = capsys.readouterr().err.strip().splitlines()
+    assert "the part is not where it was taught" in err[-1]
+    assert model.read_bytes() == written

@@ -18,7 +18,7 @@ from drivers.core.errors import ConfigError
 from drivers.core.pose import Pose
 
 PART_COMMANDS = ("teach", "acquire", "train", "position", "grasp", "evaluate", "table1", "demo")
-CTL_JOB_COMMANDS = ("teach", "acquire", "train", "position", "grasp")
+CTL_JOB_COMMANDS = ("teach", "acquire", "train", "rezero", "position", "grasp")
 POSE = Pose(300.0, 0.0, 150.0, -90.0, 90.0, 0.0)
 
 

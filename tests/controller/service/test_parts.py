@@ -126,3 +126,21 @@ def test_simulated_service_taught_two_parts_positions_either(tmp_path, short_dir
         after = {kind: entry["model"] for kind, entry in client.call("status")["parts"].items()}
         assert after == loaded
         assert [kind for kind, _ in positioned] == ["cube", "nut"]
+
+
+def test_a_rezero_job_rewrites_the_parts_model_and_puts_it_in_use(tmp_path, short_dir,
+                                                                  cube_model_files):
+    config = service_config(tmp_path, short_dir)
+    state = copy_state(cube_model_files, config)
+    with running_service(config, _fake_cell()) as service, client_for(service) as client:
+        before = service._models.slot("cube").model
+        job = client.call("rezero", wait=True, part="cube", frames=3)["job"]
+        assert job["outcome"] == "done", job
+        result = job["result"]
+        assert result["model"] == str(state / "model-gabor.fpm") and result["frames"] == 3
+        assert set(result["shift_mm"]) >= {"nn1", "nn1_rot"}
+        now = service._models.slot("cube").model
+        assert now is not before and now.model.training["rezero"][-1]["frames"] == 3
+        with pytest.raises(ServiceError, match="frames: must be within"):
+            client.call("rezero", frames=0)
+        assert client.call("status")["state"] == "idle"

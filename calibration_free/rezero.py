@@ -1,0 +1,95 @@
+"""Re-zero a trained model in the light the cell works in.
+
+Training pins the translation nets to read zero on the frames taken at the taught pose
+(``training._train_pinned``): that is where the loop settles. Under another light (a low side
+lamp, the room dimmed) the part's silhouette itself changes by a quarter to half a pixel (its
+side faces and bevels shade differently; README "Where the remaining error comes from"), the
+nets read 0.2-0.3 mm at the taught pose, and the loop settles that far off. Frames taken at the
+taught pose in the new light move the nets' zero back there, without a new acquisition: the
+same shift of each net's output that training applied, measured again. The rotation (NN2) is
+left as trained: its reading at the pose moves by a tenth of a degree, within its scatter.
+
+The part must lie where it was taught and be seen whole: a reading far from zero (over
+MAX_SHIFT_MM) means it does not, or the camera moved, and nothing is changed.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import math
+from collections.abc import Sequence
+from dataclasses import dataclass
+
+import numpy as np
+
+from calibration_free.bundle import ModelBundle
+from calibration_free.errors import TrainingError
+from calibration_free.perception import Perception
+
+# A reading at the taught pose beyond this is not a change of light (a quarter pixel is about
+# 0.25 mm): the part is not where it was taught, or the camera was knocked.
+MAX_SHIFT_MM = 1.0
+# At least this share of the frames must show the part whole.
+MIN_FOUND_SHARE = 0.75
+# A frame shows the part whole where its blob is within this share of the taught area.
+WHOLE_SHARE = 0.9
+
+
+@dataclass(frozen=True)
+class Rezeroed:
+    """A re-zeroed model and what moved: each translation net's mean reading at the taught
+    pose before (mm), and how many frames were used of how many taken."""
+
+    bundle: ModelBundle
+    shift_mm: dict[str, tuple[float, float]]
+    frames_used: int
+    frames: int
+
+    def report(self) -> dict:
+        """JSON-able: the shifts (rounded to a micrometre) and the frame counts."""
+        return {"shift_mm": {k: [round(v, 3) for v in s] for k, s in self.shift_mm.items()},
+                "frames_used": self.frames_used, "frames": self.frames}
+
+
+def rezero(bundle: ModelBundle, images: Sequence[np.ndarray]) -> Rezeroed:
+    """The bundle with its translation nets reading zero on ``images`` (frames at the taught
+    pose in the cell's light); its ``training`` metadata records the shift.
+
+    Raises:
+        TrainingError: the part is seen whole in too few frames, or the nets read more than
+            MAX_SHIFT_MM there (the part is not where it was taught).
+        ImageError: a frame of the wrong size or type.
+    """
+    if not images:
+        raise TrainingError("rezero: no frames")
+    percepts = [Perception(bundle).perceive(image) for image in images]
+    whole = [i for i, p in enumerate(percepts) if p.ok and _whole(bundle, p)]
+    if len(whole) < max(1, math.ceil(MIN_FOUND_SHARE * len(images))):
+        raise TrainingError(f"rezero: the part was seen whole in only {len(whole)} of "
+                            f"{len(images)} frames at the taught pose; put it where it was "
+                            f"taught, uncovered")
+    nn1 = np.mean([percepts[i].nn1_mm for i in whole], axis=0)
+    rot = np.mean([percepts[i].rot_mm for i in whole], axis=0)
+    far = max(float(np.hypot(*nn1)), float(np.hypot(*rot)))
+    if far > MAX_SHIFT_MM:
+        raise TrainingError(f"rezero: at the taught pose the model reads {far:.2f} mm, over "
+                            f"{MAX_SHIFT_MM:g} mm: the part is not where it was taught, or the "
+                            f"camera moved (teach again); the model is unchanged")
+    shifted = dataclasses.replace(bundle, nn1=bundle.nn1.shifted(nn1),
+                                  nn1_rot=bundle.nn1_rot.shifted(rot))
+    shift = {"nn1": tuple(map(float, nn1)), "nn1_rot": tuple(map(float, rot))}
+    if bundle.near_mm > 0.0:  # the near correction adds to nn1_rot's reading where it is near
+        again = Perception(shifted)
+        near = np.mean([again.perceive(images[i]).full_mm for i in whole], axis=0)
+        shifted = dataclasses.replace(shifted, nn1_near=shifted.nn1_near.shifted(near))
+        shift["nn1_near"] = tuple(map(float, near))
+    result = Rezeroed(shifted, shift, len(whole), len(images))
+    history = [*bundle.training.get("rezero", []), result.report()]
+    return dataclasses.replace(result, bundle=dataclasses.replace(
+        shifted, training={**bundle.training, "rezero": history}))
+
+
+def _whole(bundle: ModelBundle, percept) -> bool:
+    share = bundle.front.seen_share(percept.localisation.area_px)
+    return percept.hidden_share is None and percept.hidden_px is None and (
+        share is None or share >= WHOLE_SHARE)

@@ -1,0 +1,83 @@
+"""Re-zeroing a trained model in another light (``calibration_free.rezero``).
+
+A light change is played on the synthetic cube by moving every frame taken at the taught pose
+a fraction of a pixel (what a side lamp does to the part's silhouette): the translation nets
+then read a few tenths of a millimetre there; re-zeroed on such frames they read zero on
+them again, and a part that is not where it was taught, or not seen whole, changes nothing.
+"""
+
+from __future__ import annotations
+
+import cv2
+import numpy as np
+import pytest
+
+from calibration_free.bundle import ModelBundle
+from calibration_free.errors import TrainingError
+from calibration_free.perception import Perception
+from calibration_free.rezero import MAX_SHIFT_MM, rezero
+from calibration_free.synthetic import render
+
+SHIFT_PX = (0.4, -0.3)
+
+
+def at_pose(cell, count: int, shift_px=(0.0, 0.0), seed: int = 1) -> list[np.ndarray]:
+    """``count`` frames at the taught pose, moved by ``shift_px`` (u, v)."""
+    rng = np.random.default_rng(seed)
+    move = np.float32([[1, 0, shift_px[0]], [0, 1, shift_px[1]]])
+    frames = [render(cell, np.zeros(3), rng) for _ in range(count)]
+    return [cv2.warpAffine(f, move, (f.shape[1], f.shape[0]), flags=cv2.INTER_LINEAR,
+                           borderMode=cv2.BORDER_REPLICATE) for f in frames]
+
+
+def readings(bundle: ModelBundle, frames) -> dict[str, np.ndarray]:
+    percepts = [Perception(bundle).perceive(f) for f in frames]
+    return {name: np.mean([getattr(p, name) for p in percepts], axis=0)
+            for name in ("nn1_mm", "rot_mm", "full_mm")}
+
+
+def test_the_nets_read_zero_again_at_the_taught_pose_in_the_new_light(saturation_bundle,
+                                                                     cell, tmp_path):
+    moved = at_pose(cell, 8, SHIFT_PX)
+    before = readings(saturation_bundle, moved)
+    assert all(np.hypot(*v) > 0.15 for v in before.values()), before  # off by the "light"
+    done = rezero(saturation_bundle, moved)
+    assert done.frames_used == done.frames == 8
+    assert np.allclose(done.shift_mm["nn1"], before["nn1_mm"])
+    assert np.allclose(done.shift_mm["nn1_rot"], before["rot_mm"])
+    # on other frames in the same light, every net now reads zero at the pose
+    after = readings(done.bundle, at_pose(cell, 6, SHIFT_PX, seed=7))
+    assert all(np.hypot(*v) < 0.05 for v in after.values()), after
+    # the rotation is left as trained, and the file keeps what was done
+    assert done.bundle.nn2 is saturation_bundle.nn2
+    path = tmp_path / "m.fpm"
+    done.bundle.save(path)
+    again = ModelBundle.load(path)
+    assert again.training["rezero"] == [done.report()]
+    assert np.allclose(readings(again, moved)["full_mm"], 0.0, atol=1e-6)
+
+
+def test_a_part_not_where_it_was_taught_changes_nothing(saturation_bundle, cell):
+    rng = np.random.default_rng(2)
+    away = [render(cell, np.array([2.5, -1.5, 0.0]), rng) for _ in range(4)]
+    with pytest.raises(TrainingError, match=f"over {MAX_SHIFT_MM:g} mm: the part is not where "
+                                            "it was taught") as refused:
+        rezero(saturation_bundle, away)
+    assert "\n" not in str(refused.value)
+
+
+def test_a_part_not_seen_whole_changes_nothing(saturation_bundle, cell):
+    frames = at_pose(cell, 4)
+    bare = [np.full_like(f, f[0, 0]) for f in frames]  # the table alone
+    with pytest.raises(TrainingError, match="seen whole in only 1 of 4 frames"):
+        rezero(saturation_bundle, [frames[0], *bare[1:]])
+    # a part with a card over a quarter of it is not whole either
+    percept = Perception(saturation_bundle).perceive(frames[0])
+    rows = np.flatnonzero((percept.localisation.part_mask > 0).any(axis=1))
+    carded = [f.copy() for f in frames]
+    for f in carded:
+        f[:rows[0] + (rows[-1] - rows[0]) // 4, :] = (70, 80, 115)
+    with pytest.raises(TrainingError, match="seen whole in only 0 of 4"):
+        rezero(saturation_bundle, carded)
+    with pytest.raises(TrainingError, match="no frames"):
+        rezero(saturation_bundle, [])
