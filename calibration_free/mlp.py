@@ -11,6 +11,7 @@ and last layers: a torch call costs ~20 us of overhead, a whole numpy pass a few
 
 from __future__ import annotations
 
+import math
 import time
 from dataclasses import dataclass
 
@@ -79,6 +80,24 @@ class NumpyMLP:
         """The same network with ``offset`` subtracted from every output."""
         return NumpyMLP(self.weights, self.biases, self.x_mean, self.x_std,
                         self.y_mean - np.asarray(offset, dtype=np.float64), self.y_std)
+
+    def turned(self, angle_rad: float) -> NumpyMLP:
+        """The same network, for a net whose two outputs are (sin a, cos a) of an angle a,
+        reading (sin, cos) of a - ``angle_rad`` instead: its output layer turned (exactly,
+        through the output standardisation).
+
+        Raises:
+            ValueError: the network does not have two outputs.
+        """
+        if self.n_outputs != 2:
+            raise ValueError(f"turned: needs a network with 2 outputs, has {self.n_outputs}")
+        c, s = math.cos(angle_rad), math.sin(angle_rad)
+        turn = np.array([[c, -s], [s, c]])  # (sin a, cos a) -> (sin(a - d), cos(a - d))
+        mix = turn * self.y_std[None, :] / self.y_std[:, None]
+        weights = [*self.weights[:-1], mix @ self.weights[-1]]
+        biases = [*self.biases[:-1], mix @ self.biases[-1]
+                  + (turn @ self.y_mean - self.y_mean) / self.y_std]
+        return NumpyMLP(weights, biases, self.x_mean, self.x_std, self.y_mean, self.y_std)
 
     @property
     def n_inputs(self) -> int:

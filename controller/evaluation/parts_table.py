@@ -123,7 +123,6 @@ def run_parts_table(config, *, system: str = "gabor", trials: int, seed: int,
                               acquisition=acquisitions[job.part], run=run)
         report.pop("_trial_states")
         report["hil"] = False
-        report["rezero"] = run["rezero"]
         rows.append({"part": job.part, "kappa": run["kappa"], **report})
     wall = time.perf_counter() - t0
     logger.info("parts table: %d parts x %d lightings x %d trials in %.1f s", len(part_names),

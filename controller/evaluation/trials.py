@@ -249,16 +249,16 @@ def evaluate(system: str, config, *, trials: int, seed: int, lighting: str | Non
         run = run_trials(system, model, eval_cfg, trials, seed, work_dir=work / "eval",
                          grasp=grasp, log=log, progress=progress, hil=hil, recorder=recorder)
     report = build_report(system, config, eval_cfg, trials=trials, seed=seed, model=model,
-                          acquisition=acquisition, run=run)
+                          acquisition=acquisition, run={**run, "rezero": rezero_report})
     report["hil"] = hil
-    report["rezero"] = rezero_report
     return report
 
 
 def build_report(system: str, config, eval_cfg, *, trials: int, seed: int,
                  model: TrainedModel, acquisition: dict, run: dict) -> dict:
     """The ``finepos evaluate`` report of one ``run_trials`` result (``config``: the one the
-    model was trained from; ``eval_cfg``: the one the trials ran on)."""
+    model was trained from; ``eval_cfg``: the one the trials ran on; ``run["rezero"]``, if
+    any: what re-zeroing the model in the trials' light moved, ``rezeroed_on``)."""
     summary = summarise(run["states"], run.get("state_times"), run.get("grasp_times"))
     report = {
         "system": system,
@@ -280,6 +280,7 @@ def build_report(system: str, config, eval_cfg, *, trials: int, seed: int,
                              if run["seconds_per_iteration"] else None),
         "outcomes": {k: run["outcomes"].count(k) for k in sorted(set(run["outcomes"]))},
         "scene": config.source,
+        "rezero": run.get("rezero"),
     }
     report["_trial_states"] = [[(s.loops, s.error) for s in t] for t in run["states"]]
     return report

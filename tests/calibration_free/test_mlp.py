@@ -143,3 +143,21 @@ def test_arrays_round_trip_and_validation():
 def test_bad_training_data_is_refused(x, y, hidden):
     with pytest.raises(TrainingError):
         train_mlp(x, y, hidden)
+
+
+def test_a_turned_network_reads_the_angle_less_the_turn_at_the_same_length():
+    rng = np.random.default_rng(3)
+    net = NumpyMLP([rng.normal(size=(6, 4)), rng.normal(size=(2, 6))],
+                   [rng.normal(size=6), rng.normal(size=2)], rng.normal(size=4),
+                   np.full(4, 0.7), np.array([0.2, -0.4]), np.array([0.3, 2.0]))
+    x = rng.normal(size=(20, 4))
+    kappa = 6
+    for turn_deg in (1.3, -20.0):
+        y, t = net(x), net.turned(np.radians(kappa * turn_deg))(x)
+        diff = (decode(y[:, 0], y[:, 1], kappa) - decode(t[:, 0], t[:, 1], kappa) + 30.0) \
+            % 60.0 - 30.0
+        assert np.allclose(diff, turn_deg)
+        assert np.allclose(np.hypot(*y.T), np.hypot(*t.T))
+    with pytest.raises(ValueError, match="2 outputs"):
+        NumpyMLP([np.ones((3, 4))], [np.zeros(3)], np.zeros(4), np.ones(4), np.zeros(3),
+                 np.ones(3)).turned(0.1)
