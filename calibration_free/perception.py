@@ -65,6 +65,10 @@ class Percept:
             None: seen whole, or no correction.
         outline_fit: that fit (the features then see the part with its hidden part drawn
             in, ``outline.completed``).
+        seen_share: the blob's area over the part's at the taught pose
+            (``FrontEnd.seen_share``): below 1 where something hides part of it; None where
+            that area is not known, or for a bar read from the end it shows (its hidden part
+            accounted for).
     """
 
     localisation: Localisation
@@ -83,6 +87,7 @@ class Percept:
     centre_px: tuple[float, float] | None = None
     hidden_share: float | None = None
     outline_fit: OutlineFit | None = field(default=None, repr=False, compare=False)
+    seen_share: float | None = None
 
     @property
     def ok(self) -> bool:
@@ -167,7 +172,8 @@ class Perception:
         timings.update(nn1=(t3 - t2) / 1e3, total=(t3 - t0) / 1e3)
         return Percept(loc, (float(dx), float(dy)), None, None, None, timings,
                        normalised=normalised, hidden_px=hidden_px, centre_px=centre,
-                       hidden_share=hidden_share, outline_fit=fit)
+                       hidden_share=hidden_share, outline_fit=fit,
+                       seen_share=None if hidden_px is not None else share)
 
     def rotation(self, percept: Percept) -> Percept:
         """Go on from a ``translation`` percept of the same frame: ROI -> Gabor features ->
@@ -220,7 +226,7 @@ class Perception:
         return Percept(loc, percept.nn1_mm, features, (float(s), float(c)), dphi, timings,
                        full_mm, percept.normalised, rot_mm, near, nn2_deg, axis_deg,
                        percept.hidden_px, percept.centre_px, percept.hidden_share,
-                       fit)
+                       fit, percept.seen_share)
 
     def perceive(self, image: np.ndarray) -> Percept:
         """The whole path in one pass: corrective translation (NN1) and rotation (NN2).

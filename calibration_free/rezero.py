@@ -78,7 +78,7 @@ def rezero(bundle: ModelBundle, images: Sequence[np.ndarray]) -> Rezeroed:
     if not images:
         raise TrainingError("rezero: no frames")
     percepts = [Perception(bundle).perceive(image) for image in images]
-    whole = [i for i, p in enumerate(percepts) if p.ok and _whole(bundle, p)]
+    whole = [i for i, p in enumerate(percepts) if p.ok and _whole(p)]
     if len(whole) < max(1, math.ceil(MIN_FOUND_SHARE * len(images))):
         raise TrainingError(f"rezero: the part was seen whole in only {len(whole)} of "
                             f"{len(images)} frames at the taught pose; put it where it was "
@@ -119,7 +119,6 @@ def rezero(bundle: ModelBundle, images: Sequence[np.ndarray]) -> Rezeroed:
         shifted, training={**bundle.training, "rezero": history}))
 
 
-def _whole(bundle: ModelBundle, percept) -> bool:
-    share = bundle.front.seen_share(percept.localisation.area_px)
+def _whole(percept) -> bool:
     return percept.hidden_share is None and percept.hidden_px is None and (
-        share is None or share >= WHOLE_SHARE)
+        percept.seen_share is None or percept.seen_share >= WHOLE_SHARE)

@@ -45,11 +45,8 @@ class GaborEstimator:
         if not p.ok:
             return TranslationEstimate(loc.status, reason=loc.reason,
                                        record={"area_px": loc.area_px}, percept=p)
-        # a bar read from the end it shows has its hidden part accounted for; a part centred
-        # on the outline it shows is still reported partly hidden (its turn is read from
-        # the cut silhouette)
-        share = (None if p.hidden_px is not None
-                 else self.perception.bundle.front.seen_share(loc.area_px))
+        # a part centred on the outline it shows is still reported partly hidden
+        share = p.seen_share
         return TranslationEstimate("ok", p.full_mm[0], p.full_mm[1], loc.u_px, loc.v_px,
                                    record={"area_px": loc.area_px, "seen_share": share,
                                            "nn1": list(p.nn1_mm),
