@@ -56,8 +56,10 @@ MAX_TURNED = 12
 # A fit is taken where its points lie within this RMS distance of the taught outline, at
 # least MIN_KEPT_SHARE of the taught outline's length shows the table beyond it,
 # and the fitted scale and turn are within these (near the taught pose: the image scale
-# changes about 1% a mm of height, the loop turns the part to within a few degrees).
-MAX_RMS_PX = 1.0
+# changes about 1% a mm of height, the loop turns the part to within a few degrees). A ledge
+# turned 75-85 deg fits its nearest turned outline at 0.94-1.01 px: with 1.0 px the loop
+# stepped back and forth by 5 mm between looks where the fit held and where it did not.
+MAX_RMS_PX = 1.25
 MIN_KEPT_SHARE = 0.4
 SCALE_RANGE = (0.85, 1.15)
 MAX_TURN_DEG = 30.0
