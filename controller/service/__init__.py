@@ -27,20 +27,20 @@ Commands (arguments, types, ranges and defaults in ``commands.COMMANDS``):
   config (source, last_reload), iteration_log, clients;
 - jobs, refused unless idle (``busy``, ``fault``, ``not_ready``, ``stopping``): ``teach``
   (``auto``: simulated cell only; otherwise the current pose, with the grasp geometry of
-  ``controller.part`` unless ``grasp_depth_mm`` and ``object_width_mm`` are given),
-  ``acquire`` (``set``: nn1 | nn2 | test, ``seed``),
-  ``train`` (``system``), ``rezero`` (``frames``: re-zero the part's Gabor model at the taught
-  pose in the cell's light, ``FinePositioner.rezero``; the part must lie where it was
-  taught), ``position`` (``max_loops``; ``offset`` [dx_mm, dy_mm, dphi_deg]:
-  simulated cell only), ``grasp``. Each takes ``part`` (cube | nut | ledge | screw; default:
-  the one part taught, else the cell's; for ``teach`` the cell's: the simulated table's, or
-  ``controller.part``; refused as ``bad_request`` when several parts are taught and none is
-  named): the job works in that part's state folder with that part's model, and on the
-  simulated cell the part is put on the table first (the cell is built anew with it). Every
-  taught part's model stays loaded (one slot per part), so positioning another part loads
-  nothing. Each takes ``wait``: false (default) answers when the job has
-  started, true when it has ended; the job's ``outcome`` is done, failed (the reason says why,
-  e.g. ``no_object: ...`` or ``grasp failed: excessive force ...``), aborted, or fault;
+  ``controller.part`` unless ``grasp_depth_mm`` and ``object_width_mm`` are given), ``acquire``
+  (``set``: nn1 | nn2 | test, ``seed``), ``train`` (``system``), ``rezero`` (``frames``: re-zero
+  the part's Gabor model at the taught pose in the cell's light, ``FinePositioner.rezero``; the
+  part must lie where it was taught; it is put into use unless another system's model is),
+  ``position`` (``max_loops``; ``offset`` [dx_mm, dy_mm, dphi_deg]: simulated cell only),
+  ``grasp``. Each takes ``part`` (cube | nut | ledge | screw; default: the one part taught, else
+  the cell's; for ``teach`` the cell's: the simulated table's, or ``controller.part``; refused
+  as ``bad_request`` when several parts are taught and none is named): the job works in that
+  part's state folder with that part's model, and on the simulated cell the part is put on the
+  table first (the cell is built anew with it). Every taught part's model stays loaded (one slot
+  per part), so positioning another part loads nothing. Each takes ``wait``: false (default)
+  answers when the job has started, true when it has ended; the job's ``outcome`` is done,
+  failed (the reason says why, e.g. ``no_object: ...`` or ``grasp failed: excessive force
+  ...``), aborted, or fault;
 - ``abort``: preempts the running job (no further motion command is sent) and halts the arm;
   it answers once the halt was acknowledged or after ``service.abort_wait_s`` (then
   ``halt_error`` says the halt is still waiting, and a ``halt`` event reports its outcome);

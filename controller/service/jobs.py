@@ -123,7 +123,9 @@ def _train(ctx: JobContext) -> dict[str, Any]:
 
 def _rezero(ctx: JobContext) -> dict[str, Any]:
     model, report = ctx.fp.rezero(ctx.args["frames"])
-    ctx.models.set(model, ctx.fp.model_path("gabor"))
+    in_use = ctx.models.model
+    if in_use is None or in_use.system == "gabor":  # another system in use stays in use
+        ctx.models.set(model, ctx.fp.model_path("gabor"))
     return {"part": ctx.part, "model": str(ctx.fp.model_path("gabor")), **report}
 
 
