@@ -77,7 +77,8 @@ def rezero(bundle: ModelBundle, images: Sequence[np.ndarray]) -> Rezeroed:
     """
     if not images:
         raise TrainingError("rezero: no frames")
-    percepts = [Perception(bundle).perceive(image) for image in images]
+    perception = Perception(bundle)
+    percepts = [perception.perceive(image) for image in images]
     whole = [i for i, p in enumerate(percepts) if p.ok and _whole(p)]
     if len(whole) < max(1, math.ceil(MIN_FOUND_SHARE * len(images))):
         raise TrainingError(f"rezero: the part was seen whole in only {len(whole)} of "
@@ -96,7 +97,8 @@ def rezero(bundle: ModelBundle, images: Sequence[np.ndarray]) -> Rezeroed:
         if turned:
             bundle = dataclasses.replace(bundle, nn2=bundle.nn2.turned(
                 math.radians(kappa * nn2_deg)))
-            percepts = [Perception(bundle).perceive(images[i]) if i in whole else p
+            perception = Perception(bundle)
+            percepts = [perception.perceive(images[i]) if i in whole else p
                         for i, p in enumerate(percepts)]
     nn1 = np.mean([percepts[i].nn1_mm for i in whole], axis=0)
     rot = np.mean([percepts[i].rot_mm for i in whole], axis=0)

@@ -223,8 +223,9 @@ class FinePositioner:
         model = dataclasses.replace(model, model=done.bundle)
         SYSTEMS["gabor"].save(model, self.model_path("gabor"))
         self._model = model
-        logger.info("re-zeroed %s: %s", self.model_path("gabor"), done.report()["shift_mm"])
-        return model, done.report()
+        report = done.report()
+        logger.info("re-zeroed %s: %s", self.model_path("gabor"), report["shift_mm"])
+        return model, report
 
     def use_model(self, model: TrainedModel) -> None:
         """Use an already trained or loaded model for the next positioning runs."""

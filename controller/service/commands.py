@@ -12,7 +12,7 @@ import math
 from dataclasses import dataclass
 from typing import Any
 
-from controller.fine_positioner import DATASETS
+from controller.fine_positioner import DATASETS, REZERO_FRAMES
 from controller.systems.registry import SYSTEMS
 from drivers.core.parts import PARTS
 
@@ -62,7 +62,7 @@ COMMANDS: dict[str, dict[str, Arg]] = {
     },
     "rezero": {
         "part": PART,
-        "frames": Arg(int, 8, 1, 100, help="frames at the taught pose"),
+        "frames": Arg(int, REZERO_FRAMES, 1, 100, help="frames at the taught pose"),
         "wait": WAIT,
     },
     "position": {
