@@ -82,8 +82,10 @@ class LightingConfig:
 
 @dataclass(frozen=True)
 class OccluderConfig:
-    """A flat card lying on the part over one end (the seed picks which), hiding ``coverage``
-    (0..1) of the part's length as the hand camera sees it from the pre-grasp pose."""
+    """A card (120 mm long) lying over one end of the part (the seed picks which), leaning from
+    the part to the table; its inner end lies where it hides ``coverage`` (0..1) of the
+    part's length as the hand camera sees it from the pre-grasp pose. Over the end nearer
+    the camera it also hides that end's side faces, so more."""
 
     enabled: bool = False
     coverage: float = field(default=0.0, metadata={"min": 0.0, "max": 0.9})

@@ -63,8 +63,9 @@ CLUTTER_MAX_DISTANCE_MM = 130.0
 CLUTTER_COLORS = ((0.85, 0.2, 0.15), (0.2, 0.55, 0.25), (0.15, 0.3, 0.75), (1.0, 0.85, 0.1),
                   (0.95, 0.45, 0.1), (0.8, 0.65, 0.45))
 OCCLUDER_COLOR = (0.32, 0.36, 0.48)
-OCCLUDER_LENGTH_MM = 60.0
+OCCLUDER_LENGTH_MM = 120.0
 OCCLUDER_THICKNESS_MM = 2.0
+OCCLUDER_MIN_OVERLAP_MM = 2.0  # how far the card reaches onto the part at least
 DEFAULT_ARM = SimArmConfig()
 # Where the inverse kinematics starts from: elbow up, wrist bent down over the table.
 _IK_SEED_DEG = (0.0, 30.0, -180.0, -180.0, 30.0, 0.0)
@@ -77,6 +78,26 @@ def _tool_matrix(pose: Pose) -> np.ndarray:
     t[:3, :3] = pose.rotation()
     t[:3, 3] = pose.position_mm
     return t
+
+
+def _card_slope(u_mm: np.ndarray, z_mm: np.ndarray, length_mm: float) -> float:
+    """The slope (rad) of a straight card of ``length_mm`` whose inner end lies at u = 0 and
+    outer end on the table (z = 0), resting on the part's points (u, z) beneath it: the
+    least slope, to a quarter degree, at which its underside clears every one of them."""
+    for step in range(1, 321):  # 0.25 deg steps up to 80 deg
+        slope = math.radians(0.25 * step)
+        out = length_mm * math.cos(slope)
+        below = (u_mm >= 0.0) & (u_mm <= out)
+        height = length_mm * math.sin(slope) - u_mm[below] * math.tan(slope)
+        if np.all(height >= z_mm[below] - 1e-6):
+            return slope
+    raise ValueError("the card is too short to lie over this part")
+
+
+def _rot_y(angle_rad: float) -> np.ndarray:
+    """Rotation about y by ``angle_rad`` (3x3): x turns towards -z."""
+    c, s = math.cos(angle_rad), math.sin(angle_rad)
+    return np.array([[c, 0.0, s], [0.0, 1.0, 0.0], [-s, 0.0, c]])
 
 
 def _translation(x_mm: float, y_mm: float, z_mm: float) -> np.ndarray:
@@ -276,28 +297,37 @@ class SimCell:
         return body
 
     def _build_occluder(self) -> _Item:
-        """A flat card lying on the part, hiding ``coverage`` of its length along the part's
-        x axis as the hand camera sees it from the pre-grasp pose, from the end on a side
-        picked by the seed (a screw: its head or its tip); as wide as the part's grasp, so
-        the jaws pass. The camera looks from an angle: measured on the table's plane a card
-        over the far end would hide almost nothing and one over the near end most of the
-        part, so the share is taken in the camera's view."""
+        """A flat card lying over one end of the part (the seed picks which; a screw: its head
+        or its tip), as wide as the part's grasp, so the jaws pass. A card this long does not
+        lie flat on a part this small: it rests on the part's edge and on the table beyond,
+        sloping down from the part. Its inner end lies over the part where, as the hand camera
+        sees the part from the pre-grasp pose, the card hides ``coverage`` of its length in
+        view. The camera looks from an angle, so over the end nearer the camera the card also
+        hides that end's side faces: it hides more there (it must reach onto the part to lie
+        on it) and ``coverage`` is the least it hides."""
         cid = self._client
         coverage = self.scene.occluder.coverage
-        z = self.part.height_mm + OCCLUDER_THICKNESS_MM / 2.0 + 0.2
-        x = self._seen_along_x(z)
+        half_t = OCCLUDER_THICKNESS_MM / 2.0
+        x = self._seen_along_x(self.part.height_mm + OCCLUDER_THICKNESS_MM)
         side = 1.0 if self._occluder_rng.random() < 0.5 else -1.0
         end = float(x.max() if side > 0.0 else x.min())
-        inner_edge = end - side * coverage * float(x.max() - x.min())
-        centre_x = inner_edge + side * OCCLUDER_LENGTH_MM / 2.0
-        half = np.array([OCCLUDER_LENGTH_MM / 2.0, self.part.grasp_width_mm / 2.0,
-                         OCCLUDER_THICKNESS_MM / 2.0])
+        vertices = self.part.mesh.vertices_mm
+        reach = float(vertices[:, 0].max() if side > 0.0 else -vertices[:, 0].min())
+        # u: distance outwards from the card's inner end, along the part's x axis
+        inner = end - side * coverage * float(x.max() - x.min())
+        inner = side * min(side * inner, reach - OCCLUDER_MIN_OVERLAP_MM)
+        slope = _card_slope(side * (vertices[:, 0] - inner), vertices[:, 2], OCCLUDER_LENGTH_MM)
+        length = OCCLUDER_LENGTH_MM / 2.0
+        pose = _translation(inner + side * (length * math.cos(slope) + half_t * math.sin(slope)),
+                            0.0, length * math.sin(slope) + half_t * math.cos(slope) + 0.2)
+        pose[:3, :3] = _rot_y(side * slope)
+        half = np.array([OCCLUDER_LENGTH_MM / 2.0, self.part.grasp_width_mm / 2.0, half_t])
         visual = robot_model.visual_shape(meshes.box(half, meshes.BODY_U), cid,
                                           [*OCCLUDER_COLOR, 1.0])
         collision = p.createCollisionShape(p.GEOM_BOX, halfExtents=(half / 1000.0).tolist(),
                                            physicsClientId=cid)
         body = p.createMultiBody(0.0, collision, visual, physicsClientId=cid)
-        return _Item(body, _translation(centre_x, 0.0, z), LABEL_OCCLUDER)
+        return _Item(body, pose, LABEL_OCCLUDER)
 
     def _seen_along_x(self, z_mm: float) -> np.ndarray:
         """Where the hand camera, at the pre-grasp pose, sees each vertex of the part on the
