@@ -10,7 +10,9 @@ arm's ``max_step_deg`` (a part without symmetry may need up to 180 deg) is taken
 the next look measures the rest. A full look whose turn contradicts the last full loop's (the
 reading should have dropped by the turn taken, and it did not) stops the loop without moving
 (``inconsistent``): the rotation reading no longer follows the arm, so the next step cannot be
-trusted either.
+trusted either. A look before the first full loop that finds no part, or little of it
+(something lies over the end nearer the camera, which looks at the part from an angle),
+turns the camera to the other side of the part and looks again (``look_around_deg``).
 """
 
 from __future__ import annotations
@@ -81,6 +83,16 @@ class LoopConfig:
     part lying on it), and the pose read from what is seen is off: the loop ends as
     ``occluded`` (no grasp follows). None: no check (nor for a system or model file that
     does not know the taught area);
+    look_around_deg / look_around_below: where a look before the first full loop finds no
+    part, or sees less than ``look_around_below`` of the part's area at the taught pose, the
+    tool turns about its axis by ``look_around_deg`` (in equal commands within the arm's
+    ``max_step_deg``; the look and the turn count as a full loop) and the run goes on from
+    the next look (stopping as ``no_object`` where that finds none). The camera looks at
+    the part from an angle, so something lying over the end nearer the camera hides most of
+    it, and a pose read from the rest is off (a screw with half of it hidden: 12 mm); from
+    the other side (180 deg) it lies over the far end and hides less. Once a run, and only
+    before the first full loop: once the camera has turned to the part's heading a part
+    lost is not searched for. None: no look-around (the paper's loop);
     save_images: save each grabbed image as PNG next to the iteration log.
     """
 
@@ -95,6 +107,8 @@ class LoopConfig:
     turn_check_deg: float | None = field(default=10.0, metadata={"min": 0.0})
     turn_check_share: float = field(default=0.4, metadata={"min": 0.0, "max": 1.0})
     hidden_check_share: float | None = field(default=0.1, metadata={"min": 0.0, "max": 1.0})
+    look_around_deg: float | None = field(default=180.0, metadata={"min": 0.0, "max": 360.0})
+    look_around_below: float | None = field(default=0.6, metadata={"min": 0.0, "max": 1.0})
     save_images: bool = False
 
 
@@ -189,6 +203,8 @@ class PositioningLoop:
         # the turn the next full look should read (the last full loop's reading less the
         # turn taken) and how far off it may be; None before the first full loop
         expected: tuple[float, float] | None = None
+        turned = False  # a full loop made (the part's turn read and taken)
+        looked_around = False
 
         def finish(outcome: Outcome, reason: str) -> PositioningResult:
             logger.debug("positioning %s: %s after %.1f loops (%s)", run_id, outcome, loops,
@@ -209,6 +225,23 @@ class PositioningLoop:
                                      loops=loops, error=states[-1].error)
             if tr.status != "ok":
                 record.estimates["reason"] = tr.reason  # why the part was not found
+            if not turned and not looked_around and self._look_around_wanted(tr) \
+                    and loops + 1.0 <= budget + 1e-9:
+                looked_around = True
+                record.estimates["look_around"] = (
+                    "the part not found" if tr.status != "ok" else
+                    f"{tr.seen_share:.0%} of the part seen") + \
+                    f": turning the tool by {cfg.look_around_deg:g} deg to look from another side"
+                record.commanded = ToolStep(0.0, 0.0, 0.0, cfg.look_around_deg)
+                outcome = self._move(record, "around", 1.0, (t0, t1), frame.image)
+                if isinstance(outcome, str):
+                    return finish("rejected", outcome)
+                loops += 1.0
+                iteration += 1
+                states.append(LoopState(loops, record.error))
+                per_iteration.append(outcome)
+                continue
+            if tr.status != "ok":
                 self._write(record, "stop", (t0, t1, time.perf_counter()), frame.image)
                 return finish(tr.status, tr.reason or tr.status)
             read_mm = math.hypot(tr.dx_mm, tr.dy_mm)
@@ -259,26 +292,63 @@ class PositioningLoop:
             if spent:
                 self._write(record, "stop", (t0, t1, t2), frame.image)
                 return finish("budget", f"loop budget {budget:g} spent")
-            try:
-                motion = self.arm.move_tool(step)
-            except MotionRejectedError as exc:
-                record.rejected = exc.reason
-                self._write(record, "stop", (t0, t1, t2, time.perf_counter()), frame.image)
-                return finish("rejected", f"safety layer rejected the step: {exc.reason}")
-            t3 = time.perf_counter()
+            outcome = self._move(record, kind, cost, (t0, t1, t2), frame.image)
+            if isinstance(outcome, str):
+                return finish("rejected", outcome)
             loops += cost
             iteration += 1
-            error = self._error()
-            states.append(LoopState(loops, error))
-            per_iteration.append(t3 - t0)
-            record.loops, record.error = loops, error
-            record.executed, record.clipped, record.pose_after = \
-                motion.sent, motion.clipped, motion.pose
+            turned = turned or kind == "full"
+            states.append(LoopState(loops, record.error))
+            per_iteration.append(outcome)
             if kind == "full" and cfg.turn_check_deg is not None:
-                turned = motion.sent.dphi_deg
+                turned = record.executed.dphi_deg
                 expected = (read.dphi_deg - turned,
                             max(cfg.turn_check_deg, cfg.turn_check_share * abs(turned)))
-            self._write(record, kind, (t0, t1, t2, t3), frame.image)
+
+    def _move(self, record: IterationRecord, kind: LoopKind, cost: float,
+              clock: tuple[float, ...], image) -> float | str:
+        """Send the look's commanded step to the arm (a turn beyond the arm's
+        ``max_step_deg``, the look-around's, in equal commands within it) and log the look as
+        ``kind``, its loops and error those after the move. Returns the look-and-move's wall
+        time (s), or why the safety layer rejected a command (the look is then logged as a
+        stop)."""
+        t2 = clock[2] if len(clock) > 2 else time.perf_counter()
+        step = record.commanded
+        count = 1
+        limits = getattr(self.arm, "limits", None)
+        if kind == "around" and limits is not None and limits.max_step_deg > 0:
+            count = max(1, math.ceil(abs(step.dphi_deg) / limits.max_step_deg - 1e-9))
+        part = dataclasses.replace(step, dphi_deg=step.dphi_deg / count)
+        sent = []
+        try:
+            for _ in range(count):
+                motion = self.arm.move_tool(part)
+                sent.append(motion)
+        except MotionRejectedError as exc:
+            record.rejected = exc.reason
+            self._write(record, "stop", (*clock[:2], t2, time.perf_counter()), image)
+            return f"safety layer rejected the step: {exc.reason}"
+        t3 = time.perf_counter()
+        record.loops += cost
+        record.error = self._error()
+        record.executed = sent[0].sent if count == 1 else ToolStep(
+            *(sum(getattr(m.sent, f) for m in sent)
+              for f in ("dx_mm", "dy_mm", "dz_mm", "dphi_deg")))
+        record.clipped = any(m.clipped for m in sent)
+        record.pose_after = sent[-1].pose
+        self._write(record, kind, (*clock[:2], t2, t3), image)
+        return t3 - clock[0]
+
+    def _look_around_wanted(self, tr: TranslationEstimate) -> bool:
+        """Whether a look calls for the look-around: no part found, or the part seen at less
+        than ``look_around_below`` of its area at the taught pose."""
+        cfg = self.config
+        if not cfg.look_around_deg:
+            return False
+        if tr.status != "ok":
+            return tr.status == "no_object"
+        return cfg.look_around_below is not None and tr.seen_share is not None \
+            and tr.seen_share < cfg.look_around_below
 
     def _hidden(self, tr: TranslationEstimate, read_mm: float) -> bool:
         """Whether a look where the loop ends shows the part partly hidden: near the taught

@@ -7,7 +7,7 @@ from typing import Any, Literal
 
 from drivers.core.pose import Pose, ToolStep
 
-LoopKind = Literal["half", "full", "check", "stop"]
+LoopKind = Literal["half", "full", "around", "check", "stop"]
 
 
 @dataclass
@@ -22,7 +22,8 @@ class IterationRecord:
         u_px, v_px: the part's centre in the image (NaN when not found).
         status: ``ok``, ``no_object`` or ``ambiguous``.
         estimates: the estimators' values for the log (network outputs, timings...).
-        loop_kind: ``half`` or ``full`` (a move was made), ``check`` (a full look found the
+        loop_kind: ``half`` or ``full`` (a move was made), ``around`` (the look-around's
+            turn, ``LoopConfig.look_around_deg``), ``check`` (a full look found the
             pose reached: no move), ``stop`` (no move: lost part, budget spent, rejected step).
         loops: cumulative loop count after this look (half = 0.5, full = 1).
         commanded: the step the loop asked for (None when it computed none).

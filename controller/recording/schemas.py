@@ -82,7 +82,7 @@ ITERATION_RECORD = {
         "system": {"type": "string"}, "iteration": {"type": "integer"},
         "u_px": {"type": ["number", "null"]}, "v_px": {"type": ["number", "null"]},
         "status": {"type": "string", "enum": ["ok", "no_object", "ambiguous"]},
-        "loop_kind": {"type": "string", "enum": ["half", "full", "check", "stop"]},
+        "loop_kind": {"type": "string", "enum": ["half", "full", "around", "check", "stop"]},
         "loops": {"type": "number"}, "commanded": _STEP, "executed": _STEP,
         "clipped": {"type": "boolean"},
         "timings_ms": {"type": "object"},

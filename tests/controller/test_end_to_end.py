@@ -1,5 +1,6 @@
 """End to end on the simulated cell: teach, acquire, train, position, grasp; the CLI."""
 
+import dataclasses
 import json
 import math
 
@@ -11,7 +12,7 @@ from controller.devices import open_devices
 from controller.evaluation.metrics import is_safe
 from controller.fine_positioner import FinePositioner
 from controller.loop.iteration_log import IterationLog, read_log
-from drivers.core.pose import ToolStep
+from drivers.core.pose import ToolStep, wrap_deg
 
 pytestmark = pytest.mark.slow
 
@@ -41,7 +42,10 @@ def test_converges_to_a_safe_grasp_within_a_small_budget(trained, tmp_path, offs
     assert full and len(full[0]["features"]) == 36 and len(full[0]["nn2"]) == 2
 
 
-def test_no_object_stops_without_moving(trained):
+def test_no_object_looks_from_the_other_side_then_stops_without_a_step(trained):
+    """A part out of view: the tool turns 180 deg where it is (the look-around) and, the
+    part not found from there either, the loop stops; with the look-around off it stops
+    without moving."""
     cfg = load_config(None)
     with open_devices(cfg) as devices:
         fp = FinePositioner(devices, cfg, state_dir=trained)
@@ -49,6 +53,16 @@ def test_no_object_stops_without_moving(trained):
         fp.move_to(fp.state().nominal_pose)
         before = devices.arm.pose()
         result = fp.position()
+        assert result.outcome == "no_object" and result.loops == 1.0
+        after = devices.arm.pose()
+        assert (after.x_mm, after.y_mm, after.z_mm) == pytest.approx(
+            (before.x_mm, before.y_mm, before.z_mm), abs=0.05)
+        assert abs(wrap_deg(after.t_deg - before.t_deg, 360.0)) == pytest.approx(180.0, abs=0.05)
+        fp.move_to(fp.state().nominal_pose)
+        off = dataclasses.replace(cfg, controller=dataclasses.replace(
+            cfg.controller, loop=dataclasses.replace(cfg.controller.loop, look_around_deg=None)))
+        before = devices.arm.pose()
+        result = FinePositioner(devices, off, state_dir=trained).position()
         assert result.outcome == "no_object" and result.loops == 0
         assert devices.arm.pose() == before
 

@@ -8,7 +8,8 @@ import pytest
 from controller.loop.iteration_log import IterationLog, read_log
 from controller.loop.positioning import LoopConfig, PositioningLoop
 from controller.systems.estimator import TranslationEstimate
-from drivers.core.pose import ToolStep
+from drivers.core.errors import MotionRejectedError
+from drivers.core.pose import ToolStep, wrap_deg
 from drivers.safety import SafetyLimits
 from tests.controller.loop.loop_fixtures import NOMINAL, TruthEstimator, truth_error
 from tests.mocks.fakes import FakeArm, FakeCamera
@@ -65,9 +66,9 @@ def test_budget_stops_the_loop_without_exceeding_it():
     assert result.loops <= 1.5
 
 
-@pytest.mark.parametrize("status", ["no_object", "ambiguous"])
-def test_no_object_stops_without_moving(status, tmp_path):
-    arm, cam, cfg = make(ToolStep(5.0, 0.0, 0.0, 0.0))
+@pytest.mark.parametrize("status,look_around", [("no_object", None), ("ambiguous", 180.0)])
+def test_no_object_stops_without_moving(status, look_around, tmp_path):
+    arm, cam, cfg = make(ToolStep(5.0, 0.0, 0.0, 0.0), look_around_deg=look_around)
     with IterationLog(tmp_path / "it.jsonl") as log:
         result = PositioningLoop(arm, cam, cfg, log).run(TruthEstimator(arm, status=status))
     assert result.outcome == status and "scripted" in result.reason
@@ -75,6 +76,120 @@ def test_no_object_stops_without_moving(status, tmp_path):
     (record,) = read_log(tmp_path / "it.jsonl")
     assert record["status"] == status and record["executed"] is None
     assert record["reason"] == f"scripted {status}"
+
+
+class HiddenNearEnd(TruthEstimator):
+    """Sees no part until the camera has turned by at least ``hidden_until_deg`` from where
+    it started (what lay over the end nearer the camera is then over the far end)."""
+
+    def __init__(self, arm, hidden_until_deg=150.0, lost_after_looks=None, **kw):
+        super().__init__(arm, **kw)
+        self.start_t = arm._pose.t_deg
+        self.hidden_until_deg, self.lost_after_looks, self.looks = \
+            hidden_until_deg, lost_after_looks, 0
+
+    def estimate_translation(self, image):
+        self.looks += 1
+        turned = abs(wrap_deg(self.arm._pose.t_deg - self.start_t, 360.0))
+        if turned < self.hidden_until_deg or (self.lost_after_looks is not None
+                                              and self.looks > self.lost_after_looks):
+            return TranslationEstimate("no_object", reason="scripted hidden")
+        return super().estimate_translation(image)
+
+
+def test_a_part_not_found_is_looked_for_from_its_other_side(tmp_path):
+    """No part in the first look: the tool turns by 180 deg, in two commands within the
+    arm's 100 deg, counted as one loop; the part is found from there and the loop converges
+    (the kappa-4 part needs no turn back)."""
+    limits = SafetyLimits(max_step_deg=100.0, on_violation="reject")
+    arm, cam, cfg = make(ToolStep(6.0, -2.0, 0.0, 5.0), limits=limits)
+    with IterationLog(tmp_path / "it.jsonl") as log:
+        result = PositioningLoop(arm, cam, cfg, log, lambda: truth_error(arm)).run(
+            HiddenNearEnd(arm))
+    assert result.outcome == "converged"
+    records = read_log(tmp_path / "it.jsonl")
+    first = records[0]
+    assert first["loop_kind"] == "around" and first["status"] == "no_object"
+    assert first["commanded"] == {"dx_mm": 0.0, "dy_mm": 0.0, "dz_mm": 0.0, "dphi_deg": 180.0}
+    assert first["executed"]["dphi_deg"] == pytest.approx(180.0)
+    assert "another side" in first["look_around"] and first["loops"] == 1.0
+    assert [m.t_deg for m in arm.moves[:2]] == pytest.approx(
+        [NOMINAL.t_deg + 5.0 + 90.0, wrap_deg(NOMINAL.t_deg + 5.0 + 180.0, 360.0)])
+    assert records[1]["loop_kind"] == "half" and result.states[1].loops == 1.0
+    ex, ey, _ = result.states[-1].error
+    assert abs(ex) < 0.1 and abs(ey) < 0.1
+
+
+def test_the_look_around_is_made_once_and_only_before_the_first_full_loop(tmp_path):
+    limits = SafetyLimits(max_step_deg=100.0, on_violation="reject")
+    # not found from either side: one look-around, then no_object
+    arm, cam, cfg = make(ToolStep(6.0, 0.0, 0.0, 0.0), limits=limits)
+    result = PositioningLoop(arm, cam, cfg).run(HiddenNearEnd(arm, hidden_until_deg=360.0))
+    assert result.outcome == "no_object" and result.loops == 1.0 and len(arm.moves) == 2
+    # lost after a full loop: stops where it is, no turn
+    arm, cam, cfg = make(ToolStep(1.0, 0.0, 0.0, 5.0), limits=limits)
+    result = PositioningLoop(arm, cam, cfg).run(
+        HiddenNearEnd(arm, hidden_until_deg=0.0, lost_after_looks=1))
+    assert result.outcome == "no_object" and len(arm.moves) == 1
+    # off, or no budget left for it: stops at once
+    for kw in ({"look_around_deg": None}, {"max_loops": 0.5}):
+        arm, cam, cfg = make(ToolStep(6.0, 0.0, 0.0, 0.0), limits=limits, **kw)
+        result = PositioningLoop(arm, cam, cfg).run(HiddenNearEnd(arm))
+        assert result.outcome == "no_object" and arm.moves == []
+
+
+class HalfHidden(TruthEstimator):
+    """Sees ``near`` of the part's taught area until the camera has turned by 150 deg or
+    more, ``far`` from there."""
+
+    def __init__(self, arm, near, far=0.8, **kw):
+        super().__init__(arm, **kw)
+        self.start_t, self.near, self.far = arm._pose.t_deg, near, far
+
+    def estimate_translation(self, image):
+        turned = abs(wrap_deg(self.arm._pose.t_deg - self.start_t, 360.0))
+        share = self.far if turned >= 150.0 else self.near
+        return dataclasses.replace(super().estimate_translation(image), seen_share=share)
+
+
+@pytest.mark.parametrize("near,looked", [(0.5, True), (0.65, False)])
+def test_a_part_mostly_hidden_is_looked_at_from_its_other_side(near, looked, tmp_path):
+    """Below ``look_around_below`` (0.6) of the part seen, the first look turns the camera
+    to the part's other side before any step is read off what is seen."""
+    limits = SafetyLimits(max_step_deg=100.0, on_violation="reject")
+    arm, cam, cfg = make(ToolStep(6.0, -2.0, 0.0, 5.0), limits=limits,
+                         hidden_check_share=None)
+    with IterationLog(tmp_path / "it.jsonl") as log:
+        result = PositioningLoop(arm, cam, cfg, log).run(HalfHidden(arm, near))
+    assert result.outcome == "converged"
+    first = read_log(tmp_path / "it.jsonl")[0]
+    if looked:
+        assert first["loop_kind"] == "around" and first["status"] == "ok"
+        assert first["look_around"].startswith("50% of the part seen")
+        assert first["executed"]["dx_mm"] == 0.0 and result.states[1].loops == 1.0
+    else:
+        assert first["loop_kind"] == "half" and "look_around" not in first
+
+
+def test_a_rejected_look_around_stops_the_loop(tmp_path):
+    """The arm refuses the look-around's second command (a joint limit, say): the loop
+    stops as rejected and logs the look as a stop."""
+    limits = SafetyLimits(max_step_deg=100.0, on_violation="reject")
+    arm, cam, cfg = make(ToolStep(6.0, 0.0, 0.0, 0.0), limits=limits)
+    move_tool = arm.move_tool
+
+    def refuse_second(step):
+        if arm.moves:
+            raise MotionRejectedError("joint 6 at its limit")
+        return move_tool(step)
+
+    arm.move_tool = refuse_second
+    with IterationLog(tmp_path / "it.jsonl") as log:
+        result = PositioningLoop(arm, cam, cfg, log).run(HiddenNearEnd(arm))
+    assert result.outcome == "rejected" and "joint 6" in result.reason
+    assert len(arm.moves) == 1
+    (record,) = read_log(tmp_path / "it.jsonl")
+    assert record["loop_kind"] == "stop" and record["rejected"] == "joint 6 at its limit"
 
 
 def test_a_correction_beyond_the_training_range_is_not_taken(tmp_path):
