@@ -16,6 +16,7 @@ from pathlib import Path
 
 import numpy as np
 
+from calibration_free.baselines.align.rezero import rezero_align
 from calibration_free.dataset import Dataset
 from calibration_free.rezero import rezero
 from controller.loop.grasp import GraspResult, guarded_grasp
@@ -31,6 +32,8 @@ from drivers.core.pose import Pose
 
 logger = logging.getLogger(__name__)
 
+# The systems ``rezero`` moves the zero of.
+REZERO_SYSTEMS = ("gabor", "align")
 # Frames ``rezero`` takes at the taught pose (training pinned the nets on 4 + 4).
 REZERO_FRAMES = 8
 
@@ -201,30 +204,43 @@ class FinePositioner:
         self._model = SYSTEMS[system].load(file, state)
         return self._model
 
-    def rezero(self, frames: int = REZERO_FRAMES) -> tuple[TrainedModel, dict]:
-        """Re-zero the part's Gabor model in the cell's light (``calibration_free.rezero``):
-        move to the taught pose, take ``frames`` frames, shift the translation nets to read
-        zero there, store the model (atomically) and use it. The part must lie where it was
-        taught.
+    def rezero(self, frames: int = REZERO_FRAMES, system: str = "gabor"
+               ) -> tuple[TrainedModel, dict]:
+        """Re-zero the part's model of ``system`` in the cell's light: move to the taught
+        pose, take ``frames`` frames, move the model's zero there (Gabor: shift the
+        translation nets, ``calibration_free.rezero``; the image-alignment servo: take its
+        template again, ``calibration_free.baselines.align.rezero``), store the model
+        (atomically) and use it. The part must lie where it was taught.
 
         Returns:
-            The model and what moved (``Rezeroed.report``: each net's reading before, mm).
+            The model and what moved (the report's ``shift_mm``: each Gabor net's reading
+            before, mm; ``read_mm`` / ``read_deg``: the servo's).
 
         Raises:
-            FineposError: no gabor model stored, or ``frames`` below 1.
+            FineposError: no model of ``system`` stored, a system that does not re-zero, or
+                ``frames`` below 1.
             TrainingError: the part is not seen whole there, or not where it was taught (the
                 model file is left as it was).
         """
         if isinstance(frames, bool) or not isinstance(frames, int) or frames < 1:
             raise FineposError(f"rezero: frames must be a whole number >= 1, got {frames!r}")
-        model = self.load_model(system="gabor")
+        if system not in REZERO_SYSTEMS:
+            raise FineposError(f"rezero: the {system} system does not re-zero (only "
+                               f"{' and '.join(REZERO_SYSTEMS)})")
+        model = self.load_model(system=system)
         self.move_to(self.state().nominal_pose)
-        done = rezero(model.model, [self.devices.camera.grab().image for _ in range(frames)])
-        model = dataclasses.replace(model, model=done.bundle)
-        SYSTEMS["gabor"].save(model, self.model_path("gabor"))
-        self._model = model
+        images = [self.devices.camera.grab().image for _ in range(frames)]
+        if system == "align":
+            done = rezero_align(model.model, images)
+            moved = done.model
+        else:
+            done = rezero(model.model, images)
+            moved = done.bundle
+        model = dataclasses.replace(model, model=moved)
         report = done.report()
-        logger.info("re-zeroed %s: %s", self.model_path("gabor"), report["shift_mm"])
+        SYSTEMS[system].save(model, self.model_path(system))
+        self._model = model
+        logger.info("re-zeroed %s: %s", self.model_path(system), report)
         return model, report
 
     def use_model(self, model: TrainedModel) -> None:

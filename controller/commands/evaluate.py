@@ -27,7 +27,8 @@ Also: finepos evaluate --part all --lighting poor --rezero --trials 50
 
 --rezero: after training (or --model), re-zero the model at the taught pose in the trials'
 light, as `finepos rezero` does on a cell whose light changed, then run the trials (the report's
-rezero: what each translation net read there before, mm).
+rezero: what each translation net read there before, mm; --system align: the servo's template
+taken again, and what it read there before).
 
 Also: finepos evaluate --mounts 10 --trials 50 --json out/mounts.json
 
@@ -57,6 +58,7 @@ from controller.commands.common import (
 from controller.evaluation.mounts import evaluate_mounts
 from controller.evaluation.parts_table import parts_markdown, run_parts_table
 from controller.evaluation.trials import evaluate
+from controller.fine_positioner import REZERO_SYSTEMS
 from controller.loop.iteration_log import IterationLog
 from drivers.core import parts
 from drivers.core.errors import ConfigError
@@ -66,8 +68,9 @@ from drivers.core.files import atomic_write_text, write_json
 def run(args) -> int:
     """Run ``trials.evaluate`` with the options and print the JSON report (also to ``--json``)."""
     config = run_config_from_args(args)
-    if args.rezero and args.system != "gabor":
-        raise ConfigError(f"--rezero: only with --system gabor, not {args.system}")
+    if args.rezero and args.system not in REZERO_SYSTEMS:
+        raise ConfigError(f"--rezero: only with --system {' or '.join(REZERO_SYSTEMS)}, not "
+                          f"{args.system}")
     if args.rezero and args.mounts is not None:
         raise ConfigError("--rezero: not with --mounts (each camera is trained on its own)")
     if args.part == ALL_PARTS:
@@ -152,7 +155,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--no-grasp", action="store_true", help="skip the grasp after positioning")
     parser.add_argument("--rezero", action="store_true",
                         help="first re-zero the model at the taught pose in the trials' light "
-                             "(finepos rezero; gabor only)")
+                             "(finepos rezero; gabor or align)")
     parser.add_argument("--quiet", action="store_true", help="no progress bars")
     parser.add_argument("--workers", type=positive_int, default=1,
                         help="--part all: parallel processes for the trials (default 1)")

@@ -24,7 +24,7 @@ from controller.commands.common import (
 )
 from controller.commands.device_options import add_device_options, apply_device_options
 from controller.devices import open_devices
-from controller.fine_positioner import DATASETS, REZERO_FRAMES, FinePositioner
+from controller.fine_positioner import DATASETS, REZERO_FRAMES, REZERO_SYSTEMS, FinePositioner
 from controller.teach.spacenav import DEFAULT_SIM_START_OFFSET, TeachAborted, teach_with_spacenav
 from drivers.core.errors import ConfigError
 from drivers.core.files import write_json
@@ -96,13 +96,14 @@ def cmd_train(args) -> int:
 
 
 def cmd_rezero(args) -> int:
-    """Re-zero the part's Gabor model at the taught pose in the cell's light; print the shift."""
+    """Re-zero the part's model (``--system``: gabor or align) at the taught pose in the
+    cell's light; print what moved."""
     config, state_dir = _config(args)
     with open_devices(config) as devices:
         fp = FinePositioner(devices, config, state_dir=state_dir)
-        _, report = fp.rezero(args.frames)
-    write_json(None, {"part": config.controller.part, "model": str(fp.model_path("gabor")),
-                      **report})
+        _, report = fp.rezero(args.frames, args.system)
+    write_json(None, {"part": config.controller.part, "system": args.system,
+                      "model": str(fp.model_path(args.system)), **report})
     return 0
 
 
@@ -222,13 +223,17 @@ def register(subparsers) -> None:
                     "room dimmed): with the part where it was taught, move to the taught "
                     "pose, take --frames frames and shift the translation nets to read zero "
                     "there (the Gabor model in the part's state folder, rewritten "
-                    "atomically; no new acquisition). A reading over 1 mm there is refused: "
+                    "atomically; no new acquisition; --system align: take the servo's "
+                    "template again there). A reading over 1 mm or 3 deg there is refused: "
                     "the part is not where it was taught, or the camera moved.")
     add_config_option(p)
     add_device_options(p)
     add_part_option(p, TAUGHT_PART_HELP)
     p.add_argument("--frames", type=int, default=REZERO_FRAMES,
                    help=f"frames at the taught pose (default {REZERO_FRAMES})")
+    p.add_argument("--system", default="gabor", choices=REZERO_SYSTEMS,
+                   help="the model to re-zero: gabor (the default) or align (the "
+                        "image-alignment servo)")
     p.set_defaults(func=cmd_rezero)
 
     p = add_command(

@@ -28,7 +28,7 @@ from tqdm import tqdm
 from controller.devices import open_devices
 from controller.evaluation.hil import open_hil_devices
 from controller.evaluation.metrics import summarise, wilson
-from controller.fine_positioner import FinePositioner
+from controller.fine_positioner import REZERO_SYSTEMS, FinePositioner
 from controller.systems.base import TrainedModel
 from controller.systems.registry import SYSTEMS
 from drivers.core.errors import FineposError
@@ -102,16 +102,17 @@ def rezeroed_on(model: TrainedModel, config, work_dir: Path, seed: int, hil: boo
     the part where the scene puts it, the arm at its true grasp pose (``teach_auto``).
 
     Raises:
-        FineposError: ``model`` is not a Gabor model (only its translation nets re-zero).
+        FineposError: a system that does not re-zero (``REZERO_SYSTEMS``).
         TrainingError: the part is not seen whole there (``calibration_free.rezero``).
     """
-    if model.system != "gabor":
-        raise FineposError(f"--rezero: only the gabor system re-zeroes, not {model.system}")
+    if model.system not in REZERO_SYSTEMS:
+        raise FineposError(f"--rezero: the {model.system} system does not re-zero (only "
+                           f"{' and '.join(REZERO_SYSTEMS)})")
     with device_opener(hil)(config, seed=seed) as devices:
         fp = FinePositioner(devices, config, state_dir=work_dir)
         fp.teach_auto()
-        SYSTEMS["gabor"].save(model, fp.model_path("gabor"))
-        return fp.rezero()
+        SYSTEMS[model.system].save(model, fp.model_path(model.system))
+        return fp.rezero(system=model.system)
 
 
 def run_trials(system: str, model: TrainedModel, config, trials: int, seed: int, *,

@@ -28,9 +28,10 @@ Commands (arguments, types, ranges and defaults in ``commands.COMMANDS``):
 - jobs, refused unless idle (``busy``, ``fault``, ``not_ready``, ``stopping``): ``teach``
   (``auto``: simulated cell only; otherwise the current pose, with the grasp geometry of
   ``controller.part`` unless ``grasp_depth_mm`` and ``object_width_mm`` are given), ``acquire``
-  (``set``: nn1 | nn2 | test, ``seed``), ``train`` (``system``), ``rezero`` (``frames``: re-zero
-  the part's Gabor model at the taught pose in the cell's light, ``FinePositioner.rezero``; the
-  part must lie where it was taught; it is put into use unless another system's model is),
+  (``set``: nn1 | nn2 | test, ``seed``), ``train`` (``system``), ``rezero`` (``frames``, ``system``:
+  gabor | align; re-zero the part's model at the taught pose in the cell's light,
+  ``FinePositioner.rezero``; the part must lie where it was taught; it is put into use unless
+  another system's model is),
   ``position`` (``max_loops``; ``offset`` [dx_mm, dy_mm, dphi_deg]: simulated cell only),
   ``grasp``. Each takes ``part`` (cube | nut | ledge | screw; default: the one part taught, else
   the cell's; for ``teach`` the cell's: the simulated table's, or ``controller.part``; refused

@@ -12,7 +12,7 @@ import math
 from dataclasses import dataclass
 from typing import Any
 
-from controller.fine_positioner import DATASETS, REZERO_FRAMES
+from controller.fine_positioner import DATASETS, REZERO_FRAMES, REZERO_SYSTEMS
 from controller.systems.registry import SYSTEMS
 from drivers.core.parts import PARTS
 
@@ -63,6 +63,7 @@ COMMANDS: dict[str, dict[str, Arg]] = {
     "rezero": {
         "part": PART,
         "frames": Arg(int, REZERO_FRAMES, 1, 100, help="frames at the taught pose"),
+        "system": Arg(str, "gabor", choices=REZERO_SYSTEMS, help="the model to re-zero"),
         "wait": WAIT,
     },
     "position": {

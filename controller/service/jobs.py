@@ -122,11 +122,13 @@ def _train(ctx: JobContext) -> dict[str, Any]:
 
 
 def _rezero(ctx: JobContext) -> dict[str, Any]:
-    model, report = ctx.fp.rezero(ctx.args["frames"])
+    system = ctx.args["system"]
+    model, report = ctx.fp.rezero(ctx.args["frames"], system)
     in_use = ctx.models.model
-    if in_use is None or in_use.system == "gabor":  # another system in use stays in use
-        ctx.models.set(model, ctx.fp.model_path("gabor"))
-    return {"part": ctx.part, "model": str(ctx.fp.model_path("gabor")), **report}
+    if in_use is None or in_use.system == system:  # another system in use stays in use
+        ctx.models.set(model, ctx.fp.model_path(system))
+    return {"part": ctx.part, "system": system, "model": str(ctx.fp.model_path(system)),
+            **report}
 
 
 def _position(ctx: JobContext) -> dict[str, Any]:

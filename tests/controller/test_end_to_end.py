@@ -106,6 +106,34 @@ def test_counts_and_budgets_are_checked_before_anything_runs(argv, message, caps
     assert info.value.code == 2 and message in capsys.readouterr().err
 
 
+def test_cli_rezero_takes_the_servos_template_again(trained, tmp_path, capsys):
+    """`finepos rezero --system align` moves the image-alignment servo's zero the same way:
+    its template taken again at the taught pose; then it reads zero there; a system that does
+    not re-zero is refused in one line."""
+    import shutil
+
+    state = tmp_path / "state"
+    shutil.copytree(trained, state)
+    assert main(["train", "--system", "align", "--state-dir", str(state)]) == 0
+    capsys.readouterr()
+    poor = tmp_path / "poor.yaml"
+    poor.write_text("scene:\n  lighting:\n    preset: poor\n")
+    gabor = (state / "model-gabor.fpm").read_bytes()
+    args = ["rezero", "--system", "align", "--state-dir", str(state), "--config", str(poor)]
+    assert main(args) == 0
+    out = json.loads(capsys.readouterr().out)
+    align = state / out["model"].rsplit("/", 1)[-1]
+    assert out["system"] == "align" and align.name.startswith("model-align") and align.exists()
+    assert 0.05 < math.hypot(*out["read_mm"]) < 1.0 and out["frames_used"] == 8, out
+    assert main(args) == 0
+    again = json.loads(capsys.readouterr().out)
+    assert math.hypot(*again["read_mm"]) < 0.05, again
+    assert (state / "model-gabor.fpm").read_bytes() == gabor  # the other model untouched
+    with pytest.raises(SystemExit):
+        main(["rezero", "--system", "pca", "--state-dir", str(state)])
+    assert "invalid choice: 'pca'" in capsys.readouterr().err
+
+
 def test_cli_rezero_moves_the_zero_to_the_new_light_and_refuses_a_moved_part(trained,
                                                                               tmp_path,
                                                                               capsys):

@@ -141,6 +141,12 @@ def test_a_rezero_job_rewrites_the_parts_model_and_puts_it_in_use(tmp_path, shor
         assert set(result["shift_mm"]) >= {"nn1", "nn1_rot"}
         now = service._models.slot("cube").model
         assert now is not before and now.model.training["rezero"][-1]["frames"] == 3
+        assert result["system"] == "gabor"
         with pytest.raises(ServiceError, match="frames: must be within"):
             client.call("rezero", frames=0)
+        with pytest.raises(ServiceError, match="system: one of gabor, align, got .pca."):
+            client.call("rezero", system="pca")
+        job = client.call("rezero", wait=True, part="cube", system="align")["job"]
+        assert job["outcome"] == "failed" and "no trained align model" in job["reason"], job
+        assert service._models.slot("cube").model is now  # the Gabor model stays in use
         assert client.call("status")["state"] == "idle"

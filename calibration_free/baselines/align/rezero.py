@@ -1,0 +1,96 @@
+"""Re-zero the image-alignment servo in the light the cell works in.
+
+The servo settles where the part's silhouette registers to its template with no shift and no
+turn: the template, the mean silhouette of the frames taken at the taught pose, is its zero.
+Under another light the silhouette itself changes by a quarter to half a pixel (README "Where
+the remaining error comes from"), and the servo settles 0.1-0.3 mm off. As ``finepos rezero``
+moves the Gabor nets' zero (``calibration_free.rezero``), the template is taken again from
+frames at the taught pose in the new light, cut at the same reference point; the fitted maps
+from the registration to the tool step stay as trained. The same checks guard it: the part
+seen whole in most frames, and what the servo reads there within MAX_SHIFT_MM and
+MAX_TURN_DEG (farther, the part is not where it was taught, or the camera moved).
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import math
+from collections.abc import Sequence
+from dataclasses import dataclass
+
+import cv2
+import numpy as np
+
+from calibration_free import angles
+from calibration_free.baselines.align.model import AlignModel
+from calibration_free.errors import TrainingError
+from calibration_free.rezero import MAX_SHIFT_MM, MAX_TURN_DEG, MIN_FOUND_SHARE, WHOLE_SHARE
+
+
+@dataclass(frozen=True)
+class AlignRezeroed:
+    """A re-zeroed servo and what it read at the taught pose before (mm and deg), with how
+    many frames were used of how many taken."""
+
+    model: AlignModel
+    read_mm: tuple[float, float]
+    read_deg: float
+    frames_used: int
+    frames: int
+
+    def report(self) -> dict:
+        """JSON-able: what the servo read there (rounded to a micrometre, a thousandth of a
+        degree) and the frame counts."""
+        return {"read_mm": [round(v, 3) for v in self.read_mm],
+                "read_deg": round(self.read_deg, 3),
+                "frames_used": self.frames_used, "frames": self.frames}
+
+
+def rezero_align(model: AlignModel, images: Sequence[np.ndarray]) -> AlignRezeroed:
+    """The servo with its template taken again from ``images`` (frames at the taught pose in
+    the cell's light); its ``training`` metadata records what it read there before.
+
+    Raises:
+        TrainingError: the part is seen whole in too few frames, or the servo reads more than
+            MAX_SHIFT_MM or MAX_TURN_DEG there (the part is not where it was taught).
+        ImageError: a frame of the wrong size or type.
+    """
+    if not images:
+        raise TrainingError("rezero: no frames")
+    front = model.front
+    located = [front.locate(image) for image in images]
+    whole = [i for i, (_, loc) in enumerate(located) if loc.ok and (
+        front.seen_share(loc.area_px) is None or front.seen_share(loc.area_px) >= WHOLE_SHARE)]
+    if len(whole) < max(1, math.ceil(MIN_FOUND_SHARE * len(images))):
+        raise TrainingError(f"rezero: the part was seen whole in only {len(whole)} of "
+                            f"{len(images)} frames at the taught pose; put it where it was "
+                            f"taught, uncovered")
+    steps = []
+    for i in whole:
+        reg = model.register(images[i])[1]
+        if reg is not None:
+            steps.append(model.step(reg))
+    if not steps:
+        raise TrainingError("rezero: the part's silhouette did not register to the template "
+                            "in any frame at the taught pose")
+    steps = np.array(steps)
+    s, c = np.mean([angles.encode(d, model.kappa) for d in steps[:, 2]], axis=0)
+    read_deg = float(angles.decode(float(s), float(c), model.kappa))
+    if abs(read_deg) > MAX_TURN_DEG:
+        raise TrainingError(f"rezero: at the taught pose the servo reads {read_deg:.1f} deg, "
+                            f"over {MAX_TURN_DEG:g} deg: the part was turned since it was "
+                            f"taught, or the camera moved (teach again); the model is unchanged")
+    read_mm = tuple(float(v) for v in steps[:, :2].mean(axis=0))
+    if math.hypot(*read_mm) > MAX_SHIFT_MM:
+        raise TrainingError(f"rezero: at the taught pose the servo reads "
+                            f"{math.hypot(*read_mm):.2f} mm, over {MAX_SHIFT_MM:g} mm: the part "
+                            f"is not where it was taught, or the camera moved (teach again); "
+                            f"the model is unchanged")
+    size = model.template.shape[0]
+    template = np.mean([cv2.getRectSubPix(front.feature_frame(*located[i]), (size, size),
+                                          front.nominal_uv_px) for i in whole],
+                       axis=0).astype(np.float32)
+    result = AlignRezeroed(model, read_mm, read_deg, len(whole), len(images))
+    history = [*model.training.get("rezero", []), result.report()]
+    return dataclasses.replace(result, model=dataclasses.replace(
+        model, template=template, training={**model.training, "rezero": history}))
