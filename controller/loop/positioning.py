@@ -203,8 +203,20 @@ class PositioningLoop:
         # the turn the next full look should read (the last full loop's reading less the
         # turn taken) and how far off it may be; None before the first full loop
         expected: tuple[float, float] | None = None
-        turned = False  # a full loop made (the part's turn read and taken)
-        looked_around = False
+        full_made = looked_around = False  # a full loop made; the look-around made
+
+        def move(record: IterationRecord, kind: LoopKind, cost: float,
+                 clock: tuple[float, ...], image) -> PositioningResult | None:
+            """Make the look's move and count it; the result where the arm refused it."""
+            nonlocal loops, iteration
+            outcome = self._move(record, kind, cost, clock, image)
+            if isinstance(outcome, str):
+                return finish("rejected", outcome)
+            loops += cost
+            iteration += 1
+            states.append(LoopState(loops, record.error))
+            per_iteration.append(outcome)
+            return None
 
         def finish(outcome: Outcome, reason: str) -> PositioningResult:
             logger.debug("positioning %s: %s after %.1f loops (%s)", run_id, outcome, loops,
@@ -225,7 +237,7 @@ class PositioningLoop:
                                      loops=loops, error=states[-1].error)
             if tr.status != "ok":
                 record.estimates["reason"] = tr.reason  # why the part was not found
-            if not turned and not looked_around and self._look_around_wanted(tr) \
+            if not full_made and not looked_around and self._look_around_wanted(tr) \
                     and loops + 1.0 <= budget + 1e-9:
                 looked_around = True
                 record.estimates["look_around"] = (
@@ -233,13 +245,9 @@ class PositioningLoop:
                     f"{tr.seen_share:.0%} of the part seen") + \
                     f": turning the tool by {cfg.look_around_deg:g} deg to look from another side"
                 record.commanded = ToolStep(0.0, 0.0, 0.0, cfg.look_around_deg)
-                outcome = self._move(record, "around", 1.0, (t0, t1), frame.image)
-                if isinstance(outcome, str):
-                    return finish("rejected", outcome)
-                loops += 1.0
-                iteration += 1
-                states.append(LoopState(loops, record.error))
-                per_iteration.append(outcome)
+                refused = move(record, "around", 1.0, (t0, t1), frame.image)
+                if refused is not None:
+                    return refused
                 continue
             if tr.status != "ok":
                 self._write(record, "stop", (t0, t1, time.perf_counter()), frame.image)
@@ -292,14 +300,10 @@ class PositioningLoop:
             if spent:
                 self._write(record, "stop", (t0, t1, t2), frame.image)
                 return finish("budget", f"loop budget {budget:g} spent")
-            outcome = self._move(record, kind, cost, (t0, t1, t2), frame.image)
-            if isinstance(outcome, str):
-                return finish("rejected", outcome)
-            loops += cost
-            iteration += 1
-            turned = turned or kind == "full"
-            states.append(LoopState(loops, record.error))
-            per_iteration.append(outcome)
+            refused = move(record, kind, cost, (t0, t1, t2), frame.image)
+            if refused is not None:
+                return refused
+            full_made = full_made or kind == "full"
             if kind == "full" and cfg.turn_check_deg is not None:
                 turned = record.executed.dphi_deg
                 expected = (read.dphi_deg - turned,

@@ -126,11 +126,12 @@ def test_the_look_around_is_made_once_and_only_before_the_first_full_loop(tmp_pa
     arm, cam, cfg = make(ToolStep(6.0, 0.0, 0.0, 0.0), limits=limits)
     result = PositioningLoop(arm, cam, cfg).run(HiddenNearEnd(arm, hidden_until_deg=360.0))
     assert result.outcome == "no_object" and result.loops == 1.0 and len(arm.moves) == 2
-    # lost after a full loop: stops where it is, no turn
-    arm, cam, cfg = make(ToolStep(1.0, 0.0, 0.0, 5.0), limits=limits)
-    result = PositioningLoop(arm, cam, cfg).run(
-        HiddenNearEnd(arm, hidden_until_deg=0.0, lost_after_looks=1))
-    assert result.outcome == "no_object" and len(arm.moves) == 1
+    # lost after a full loop (one that turned, or one that did not): stops where it is
+    for turn in (5.0, 0.0):
+        arm, cam, cfg = make(ToolStep(1.0, 0.0, 0.0, turn), limits=limits)
+        result = PositioningLoop(arm, cam, cfg).run(
+            HiddenNearEnd(arm, hidden_until_deg=0.0, lost_after_looks=1))
+        assert result.outcome == "no_object" and len(arm.moves) == 1
     # off, or no budget left for it: stops at once
     for kw in ({"look_around_deg": None}, {"max_loops": 0.5}):
         arm, cam, cfg = make(ToolStep(6.0, 0.0, 0.0, 0.0), limits=limits, **kw)
