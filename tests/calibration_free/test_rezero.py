@@ -82,13 +82,20 @@ def test_nn2_reads_zero_again_at_the_taught_pose(saturation_bundle, cell):
         rezero(saturation_bundle, far)
 
 
-def test_a_part_not_where_it_was_taught_changes_nothing(saturation_bundle, cell):
+def refuses_a_part_away_from_the_taught_pose(do_rezero, cell) -> None:
+    """``do_rezero`` (frames -> result) refuses, in one line, frames of the part 3 mm from
+    where it was taught."""
     rng = np.random.default_rng(2)
     away = [render(cell, np.array([2.5, -1.5, 0.0]), rng) for _ in range(4)]
     with pytest.raises(TrainingError, match=f"over {MAX_SHIFT_MM:g} mm: the part is not where "
                                             "it was taught") as refused:
-        rezero(saturation_bundle, away)
+        do_rezero(away)
     assert "\n" not in str(refused.value)
+
+
+def test_a_part_not_where_it_was_taught_changes_nothing(saturation_bundle, cell):
+    refuses_a_part_away_from_the_taught_pose(lambda frames: rezero(saturation_bundle, frames),
+                                             cell)
 
 
 def test_a_part_not_seen_whole_changes_nothing(saturation_bundle, cell):
