@@ -92,7 +92,8 @@ class LoopConfig:
     it, and a pose read from the rest is off (a screw with half of it hidden: 12 mm); from
     the other side (180 deg) it lies over the far end and hides less. Once a run, and only
     before the first full loop: once the camera has turned to the part's heading a part
-    lost is not searched for. None: no look-around (the paper's loop);
+    lost is not searched for. ``look_around_deg`` None or 0: no look-around (the paper's
+    loop); ``look_around_below`` None: only where no part is found;
     save_images: save each grabbed image as PNG next to the iteration log.
     """
 
