@@ -122,5 +122,10 @@ def rezero(bundle: ModelBundle, images: Sequence[np.ndarray]) -> Rezeroed:
 
 
 def _whole(percept) -> bool:
-    return percept.hidden_share is None and percept.hidden_px is None and (
-        percept.seen_share is None or percept.seen_share >= WHOLE_SHARE)
+    return percept.hidden_share is None and percept.hidden_px is None and \
+        seen_whole(percept.seen_share)
+
+
+def seen_whole(share: float | None) -> bool:
+    """Whether a blob's share of the taught area (None: not known) shows the part whole."""
+    return share is None or share >= WHOLE_SHARE

@@ -161,8 +161,12 @@ class AlignModel(TaughtModel):
         preprocessed, loc = self.front.locate(image)
         if not loc.ok:
             return loc, None
-        frame = self.front.feature_frame(preprocessed, loc)
-        return loc, self._template.register(frame, loc.u_px, loc.v_px)
+        return loc, self.register_silhouette(self.front.feature_frame(preprocessed, loc), loc)
+
+    def register_silhouette(self, silhouette: np.ndarray, loc: Localisation) -> Registration:
+        """Register a located frame's silhouette (``FrontEnd.feature_frame``) to the
+        template, the scan laid on the blob's centre."""
+        return self._template.register(silhouette, loc.u_px, loc.v_px)
 
     def step(self, reg: Registration) -> tuple[float, float, float]:
         """The tool step (dx_mm, dy_mm, dphi_deg) a registration reads as."""

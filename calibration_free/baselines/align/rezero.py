@@ -24,7 +24,7 @@ import numpy as np
 from calibration_free import angles
 from calibration_free.baselines.align.model import AlignModel
 from calibration_free.errors import TrainingError
-from calibration_free.rezero import MAX_SHIFT_MM, MAX_TURN_DEG, MIN_FOUND_SHARE, WHOLE_SHARE
+from calibration_free.rezero import MAX_SHIFT_MM, MAX_TURN_DEG, MIN_FOUND_SHARE, seen_whole
 
 
 @dataclass(frozen=True)
@@ -59,21 +59,14 @@ def rezero_align(model: AlignModel, images: Sequence[np.ndarray]) -> AlignRezero
         raise TrainingError("rezero: no frames")
     front = model.front
     located = [front.locate(image) for image in images]
-    whole = [i for i, (_, loc) in enumerate(located) if loc.ok and (
-        front.seen_share(loc.area_px) is None or front.seen_share(loc.area_px) >= WHOLE_SHARE)]
+    whole = [(front.feature_frame(pre, loc), loc) for pre, loc in located
+             if loc.ok and seen_whole(front.seen_share(loc.area_px))]
     if len(whole) < max(1, math.ceil(MIN_FOUND_SHARE * len(images))):
         raise TrainingError(f"rezero: the part was seen whole in only {len(whole)} of "
                             f"{len(images)} frames at the taught pose; put it where it was "
                             f"taught, uncovered")
-    steps = []
-    for i in whole:
-        reg = model.register(images[i])[1]
-        if reg is not None:
-            steps.append(model.step(reg))
-    if not steps:
-        raise TrainingError("rezero: the part's silhouette did not register to the template "
-                            "in any frame at the taught pose")
-    steps = np.array(steps)
+    steps = np.array([model.step(model.register_silhouette(silhouette, loc))
+                      for silhouette, loc in whole])
     s, c = np.mean([angles.encode(d, model.kappa) for d in steps[:, 2]], axis=0)
     read_deg = float(angles.decode(float(s), float(c), model.kappa))
     if abs(read_deg) > MAX_TURN_DEG:
@@ -87,9 +80,8 @@ def rezero_align(model: AlignModel, images: Sequence[np.ndarray]) -> AlignRezero
                             f"is not where it was taught, or the camera moved (teach again); "
                             f"the model is unchanged")
     size = model.template.shape[0]
-    template = np.mean([cv2.getRectSubPix(front.feature_frame(*located[i]), (size, size),
-                                          front.nominal_uv_px) for i in whole],
-                       axis=0).astype(np.float32)
+    template = np.mean([cv2.getRectSubPix(silhouette, (size, size), front.nominal_uv_px)
+                        for silhouette, _ in whole], axis=0).astype(np.float32)
     result = AlignRezeroed(model, read_mm, read_deg, len(whole), len(images))
     history = [*model.training.get("rezero", []), result.report()]
     return dataclasses.replace(result, model=dataclasses.replace(
