@@ -94,6 +94,10 @@ class LoopConfig:
     before the first full loop: once the camera has turned to the part's heading a part
     lost is not searched for. ``look_around_deg`` None or 0: no look-around (the paper's
     loop); ``look_around_below`` None: only where no part is found;
+    turn_in_commands: a full loop's turn beyond the arm's ``max_step_deg`` (a part without
+    symmetry needs up to 180 deg) is sent as equal commands within it, in the same loop, as
+    the look-around's is; false: it is cut to ``max_step_deg`` and the next look measures
+    the rest (such a part then takes two full loops);
     save_images: save each grabbed image as PNG next to the iteration log.
     """
 
@@ -110,6 +114,7 @@ class LoopConfig:
     hidden_check_share: float | None = field(default=0.1, metadata={"min": 0.0, "max": 1.0})
     look_around_deg: float | None = field(default=180.0, metadata={"min": 0.0, "max": 360.0})
     look_around_below: float | None = field(default=0.6, metadata={"min": 0.0, "max": 1.0})
+    turn_in_commands: bool = True
     save_images: bool = False
 
 
@@ -281,7 +286,7 @@ class PositioningLoop:
                 if cfg.settle_frames > 1 and math.hypot(read.dx_mm, read.dy_mm) <= \
                         cfg.settle_mm and abs(read.dphi_deg) <= cfg.settle_deg:
                     read = self._settle(estimator, read, record)
-                step = _turn_within_limits(read, self.arm)
+                step = read if cfg.turn_in_commands else _turn_within_limits(read, self.arm)
             record.commanded = step
             shift = math.hypot(step.dx_mm, step.dy_mm)
             t2 = time.perf_counter()
@@ -313,21 +318,25 @@ class PositioningLoop:
     def _move(self, record: IterationRecord, kind: LoopKind, cost: float,
               clock: tuple[float, ...], image) -> float | str:
         """Send the look's commanded step to the arm (a turn beyond the arm's
-        ``max_step_deg``, the look-around's, in equal commands within it) and log the look as
-        ``kind``, its loops and error those after the move. Returns the look-and-move's wall
-        time (s), or why the safety layer rejected a command (the look is then logged as a
-        stop)."""
+        ``max_step_deg`` in equal commands within it, the translation with the first) and log
+        the look as ``kind``, its loops and error those after the move. Returns the
+        look-and-move's wall time (s), or why the safety layer rejected a command (the look
+        is then logged as a stop)."""
         t2 = clock[2] if len(clock) > 2 else time.perf_counter()
         step = record.commanded
         count = 1
         limits = getattr(self.arm, "limits", None)
-        if kind == "around" and limits is not None and limits.max_step_deg > 0:
+        if limits is not None and limits.max_step_deg > 0:
             count = max(1, math.ceil(abs(step.dphi_deg) / limits.max_step_deg - 1e-9))
-        part = dataclasses.replace(step, dphi_deg=step.dphi_deg / count)
+        turn = step.dphi_deg / count
+        # a tool step translates in the tool frame before it turns: the translation sent
+        # with the first command ends where the whole step would
+        commands = [dataclasses.replace(step, dphi_deg=turn)] + \
+            [ToolStep(0.0, 0.0, 0.0, turn)] * (count - 1)
         sent = []
         try:
-            for _ in range(count):
-                motion = self.arm.move_tool(part)
+            for command in commands:
+                motion = self.arm.move_tool(command)
                 sent.append(motion)
         except MotionRejectedError as exc:
             record.rejected = exc.reason

@@ -216,9 +216,32 @@ def test_safety_rejection_stops_the_loop():
     assert arm.moves == []
 
 
-def test_a_turn_beyond_max_step_deg_is_taken_in_part(tmp_path):
+def test_a_turn_beyond_max_step_deg_is_sent_in_commands_within_it(tmp_path):
+    """A screw turned by 170 deg: one full loop, its turn in two commands of 85 deg (the
+    arm's limit is 100 deg a command), its translation with the first."""
     limits = SafetyLimits(max_step_deg=100.0, on_violation="reject")
     arm, cam, cfg = make(ToolStep(1.0, -1.0, 0.0, 170.0), limits=limits)
+    start = arm._pose
+    with IterationLog(tmp_path / "it.jsonl") as log:
+        result = PositioningLoop(arm, cam, cfg, log, lambda: truth_error(arm)).run(
+            TruthEstimator(arm, kappa=1))
+    assert result.outcome == "converged" and result.loops == 1.0
+    first = read_log(tmp_path / "it.jsonl")[0]
+    assert first["loop_kind"] == "full" and first["clipped"] is False
+    assert first["commanded"]["dphi_deg"] == pytest.approx(-170.0)
+    assert first["executed"]["dphi_deg"] == pytest.approx(-170.0)
+    assert first["executed"]["dx_mm"] == pytest.approx(first["commanded"]["dx_mm"])
+    one, two = arm.moves[:2]
+    assert wrap_deg(one.t_deg - start.t_deg, 360.0) == pytest.approx(-85.0)
+    assert wrap_deg(two.t_deg - one.t_deg, 360.0) == pytest.approx(-85.0)
+    assert two.position_mm == pytest.approx(one.position_mm)  # the second only turns
+    assert max(abs(e) for e in truth_error(arm)[:2]) < 0.05
+
+
+def test_a_turn_beyond_max_step_deg_is_taken_in_part_without_turn_in_commands(tmp_path):
+    limits = SafetyLimits(max_step_deg=100.0, on_violation="reject")
+    arm, cam, cfg = make(ToolStep(1.0, -1.0, 0.0, 170.0), limits=limits,
+                         turn_in_commands=False)
     with IterationLog(tmp_path / "it.jsonl") as log:
         result = PositioningLoop(arm, cam, cfg, log, lambda: truth_error(arm)).run(
             TruthEstimator(arm, kappa=1))
@@ -367,7 +390,8 @@ def test_the_turn_check_allows_a_share_of_the_turn_and_can_be_off():
 def test_the_turn_check_expects_the_rest_of_a_turn_taken_in_part():
     # 170 deg with a 100 deg turn limit: the next look reads the remaining 70 deg, as expected
     limits = SafetyLimits(max_step_deg=100.0, on_violation="reject")
-    arm, cam, cfg = make(ToolStep(1.0, -1.0, 0.0, 170.0), limits=limits)
+    arm, cam, cfg = make(ToolStep(1.0, -1.0, 0.0, 170.0), limits=limits,
+                         turn_in_commands=False)
     assert PositioningLoop(arm, cam, cfg).run(TruthEstimator(arm, kappa=1)).outcome == \
         "converged"
 
