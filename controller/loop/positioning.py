@@ -6,8 +6,9 @@ system has one) and move (dx, dy, dphi) (a full loop, counts 1) ->
 repeat until a full look finds a step below the convergence thresholds (no move, the pose is
 reached) or the loop budget is spent. "No object" / "ambiguous" stop without moving. Every
 step passes the arm's safety layer; a rejected step stops the loop. A turn larger than the
-arm's ``max_step_deg`` (a part without symmetry may need up to 180 deg) is taken in part, and
-the next look measures the rest. A full look whose turn contradicts the last full loop's (the
+arm's ``max_step_deg`` (a part without symmetry may need up to 180 deg) is sent as several
+commands within it (``turn_in_commands``; or taken in part, and the next look measures the
+rest). A full look whose turn contradicts the last full loop's (the
 reading should have dropped by the turn taken, and it did not) stops the loop without moving
 (``inconsistent``): the rotation reading no longer follows the arm, so the next step cannot be
 trusted either. A look before the first full loop that finds no part, or little of it
