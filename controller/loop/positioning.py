@@ -84,17 +84,18 @@ class LoopConfig:
     part lying on it), and the pose read from what is seen is off: the loop ends as
     ``occluded`` (no grasp follows). None: no check (nor for a system or model file that
     does not know the taught area);
-    look_around_deg / look_around_below: where a look before the first full loop finds no
-    part, or sees less than ``look_around_below`` of the part's area at the taught pose, the
-    tool turns about its axis by ``look_around_deg`` (in equal commands within the arm's
-    ``max_step_deg``; the look and the turn count as a full loop) and the run goes on from
-    the next look (stopping as ``no_object`` where that finds none). The camera looks at
-    the part from an angle, so something lying over the end nearer the camera hides most of
-    it, and a pose read from the rest is off (a screw with half of it hidden: 12 mm); from
-    the other side (180 deg) it lies over the far end and hides less. Once a run, and only
-    before the first full loop: once the camera has turned to the part's heading a part
-    lost is not searched for. ``look_around_deg`` None or 0: no look-around (the paper's
-    loop); ``look_around_below`` None: only where no part is found;
+    look_around_deg / look_around_below: where a look before the first full loop finds no part,
+    or sees less than ``look_around_below`` of the part's area at the taught pose, the tool
+    moves by the translation read (where the part was found within the training range: a half
+    loop's step) and turns about its axis by ``look_around_deg`` (in equal commands within the
+    arm's ``max_step_deg``; the look and the move count as a full loop) and the run goes on from
+    the next look (stopping as ``no_object`` where that finds none). The camera looks at the
+    part from an angle, so something lying over the end nearer the camera hides most of it, and
+    a pose read from the rest is off (a screw with half of it hidden: 12 mm); from the other
+    side (180 deg) it lies over the far end and hides less. Once a run, and only before the
+    first full loop: once the camera has turned to the part's heading a part lost is not
+    searched for. ``look_around_deg`` None or 0: no look-around (the paper's loop);
+    ``look_around_below`` None: only where no part is found;
     turn_in_commands: a full loop's turn beyond the arm's ``max_step_deg`` (a part without
     symmetry needs up to 180 deg) is sent as equal commands within it, in the same loop, as
     the look-around's is; false: it is cut to ``max_step_deg`` and the next look measures
@@ -247,11 +248,17 @@ class PositioningLoop:
             if not full_made and not looked_around and self._look_around_wanted(tr) \
                     and loops + 1.0 <= budget + 1e-9:
                 looked_around = True
+                # where the part was found within reach the tool first moves over it (a half
+                # loop's step), so the turn does not swing the camera round a far part
+                found = tr.status == "ok" and not self._beyond_reach(tr)
+                shift = (tr.dx_mm, tr.dy_mm) if found else (0.0, 0.0)
                 record.estimates["look_around"] = (
                     "the part not found" if tr.status != "ok" else
-                    f"{tr.seen_share:.0%} of the part seen") + \
-                    f": turning the tool by {cfg.look_around_deg:g} deg to look from another side"
-                record.commanded = ToolStep(0.0, 0.0, 0.0, cfg.look_around_deg)
+                    f"{tr.seen_share:.0%} of the part seen") + (
+                    f": moving by the {math.hypot(*shift):.1f} mm read and turning"
+                    if found else ": turning") + \
+                    f" the tool by {cfg.look_around_deg:g} deg to look from another side"
+                record.commanded = ToolStep(*shift, 0.0, cfg.look_around_deg)
                 refused = move(record, "around", 1.0, (t0, t1), frame.image)
                 if refused is not None:
                     return refused
@@ -260,7 +267,7 @@ class PositioningLoop:
                 self._write(record, "stop", (t0, t1, time.perf_counter()), frame.image)
                 return finish(tr.status, tr.reason or tr.status)
             read_mm = math.hypot(tr.dx_mm, tr.dy_mm)
-            if self.reach_mm is not None and read_mm > cfg.reach_factor * self.reach_mm:
+            if self._beyond_reach(tr):
                 self._write(record, "stop", (t0, t1, time.perf_counter()), frame.image)
                 return finish("out_of_range", f"the correction read, {read_mm:.1f} mm, is "
                                               f"beyond the training range ({self.reach_mm:.1f}"
@@ -353,6 +360,12 @@ class PositioningLoop:
         record.pose_after = sent[-1].pose
         self._write(record, kind, (*clock[:2], t2, t3), image)
         return t3 - clock[0]
+
+    def _beyond_reach(self, tr: TranslationEstimate) -> bool:
+        """Whether an ``ok`` look's translation lies beyond ``reach_factor`` times the training
+        range (never where the range is not known)."""
+        return self.reach_mm is not None and \
+            math.hypot(tr.dx_mm, tr.dy_mm) > self.config.reach_factor * self.reach_mm
 
     def _look_around_wanted(self, tr: TranslationEstimate) -> bool:
         """Whether a look calls for the look-around: no part found, or the part seen at less

@@ -2,6 +2,7 @@
 
 import dataclasses
 import json
+import math
 
 import pytest
 
@@ -155,21 +156,42 @@ class HalfHidden(TruthEstimator):
 
 @pytest.mark.parametrize("near,looked", [(0.5, True), (0.65, False)])
 def test_a_part_mostly_hidden_is_looked_at_from_its_other_side(near, looked, tmp_path):
-    """Below ``look_around_below`` (0.6) of the part seen, the first look turns the camera
-    to the part's other side before any step is read off what is seen."""
+    """Below ``look_around_below`` (0.6) of the part seen, the first look moves the tool
+    over the part by the translation read and turns the camera to the part's other side;
+    the next look is a full one."""
     limits = SafetyLimits(max_step_deg=100.0, on_violation="reject")
     arm, cam, cfg = make(ToolStep(6.0, -2.0, 0.0, 5.0), limits=limits,
                          hidden_check_share=None)
     with IterationLog(tmp_path / "it.jsonl") as log:
-        result = PositioningLoop(arm, cam, cfg, log).run(HalfHidden(arm, near))
+        result = PositioningLoop(arm, cam, cfg, log, lambda: truth_error(arm)).run(
+            HalfHidden(arm, near))
     assert result.outcome == "converged"
-    first = read_log(tmp_path / "it.jsonl")[0]
+    first, second = read_log(tmp_path / "it.jsonl")[:2]
     if looked:
         assert first["loop_kind"] == "around" and first["status"] == "ok"
-        assert first["look_around"].startswith("50% of the part seen")
-        assert first["executed"]["dx_mm"] == 0.0 and result.states[1].loops == 1.0
+        assert first["look_around"].startswith("50% of the part seen: moving by the 6.3 mm")
+        assert first["commanded"]["dphi_deg"] == 180.0
+        assert math.hypot(first["executed"]["dx_mm"], first["executed"]["dy_mm"]) == \
+            pytest.approx(math.hypot(6.0, 2.0), abs=0.01)
+        ex, ey, _ = result.states[1].error
+        assert result.states[1].loops == 1.0 and math.hypot(ex, ey) < 0.05
+        assert second["loop_kind"] == "full"
     else:
         assert first["loop_kind"] == "half" and "look_around" not in first
+
+
+def test_a_look_around_takes_no_step_beyond_the_training_range(tmp_path):
+    """A blob read beyond the training range (another part in the frame's corner, say) is
+    not moved to: the look-around only turns."""
+    limits = SafetyLimits(max_step_deg=100.0, on_violation="reject")
+    arm, cam, cfg = make(ToolStep(40.0, 0.0, 0.0, 0.0), limits=limits,
+                         hidden_check_share=None)
+    with IterationLog(tmp_path / "it.jsonl") as log:
+        PositioningLoop(arm, cam, cfg, log, reach_mm=25.0).run(HalfHidden(arm, 0.5))
+    first = read_log(tmp_path / "it.jsonl")[0]
+    assert first["loop_kind"] == "around" and first["look_around"].startswith(
+        "50% of the part seen: turning the tool by 180 deg")
+    assert first["executed"]["dx_mm"] == 0.0 and first["executed"]["dy_mm"] == 0.0
 
 
 def test_a_rejected_look_around_stops_the_loop(tmp_path):
