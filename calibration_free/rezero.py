@@ -75,24 +75,17 @@ def rezero(bundle: ModelBundle, images: Sequence[np.ndarray]) -> Rezeroed:
             MAX_SHIFT_MM there (the part is not where it was taught).
         ImageError: a frame of the wrong size or type.
     """
-    if not images:
-        raise TrainingError("rezero: no frames")
+    require_frames(images)
     perception = Perception(bundle)
     percepts = [perception.perceive(image) for image in images]
     whole = [i for i, p in enumerate(percepts) if p.ok and _whole(p)]
-    if len(whole) < max(1, math.ceil(MIN_FOUND_SHARE * len(images))):
-        raise TrainingError(f"rezero: the part was seen whole in only {len(whole)} of "
-                            f"{len(images)} frames at the taught pose; put it where it was "
-                            f"taught, uncovered")
+    require_seen_whole(len(whole), len(images))
     nn2_deg, turned = None, False
     if bundle.axis is None:  # NN2 first: the translation nets read its (sin, cos)
         kappa = bundle.kappa
         s, c = np.mean([angles.encode(percepts[i].nn2_deg, kappa) for i in whole], axis=0)
         nn2_deg = float(angles.decode(float(s), float(c), kappa))
-        if abs(nn2_deg) > MAX_TURN_DEG:
-            raise TrainingError(f"rezero: at the taught pose NN2 reads {nn2_deg:.1f} deg, over "
-                                f"{MAX_TURN_DEG:g} deg: the part was turned since it was taught, "
-                                f"or the camera moved (teach again); the model is unchanged")
+        require_near_turn("NN2", nn2_deg)
         turned = abs(nn2_deg) >= NN2_MIN_DEG
         if turned:
             bundle = dataclasses.replace(bundle, nn2=bundle.nn2.turned(
@@ -102,11 +95,7 @@ def rezero(bundle: ModelBundle, images: Sequence[np.ndarray]) -> Rezeroed:
                         for i, p in enumerate(percepts)]
     nn1 = np.mean([percepts[i].nn1_mm for i in whole], axis=0)
     rot = np.mean([percepts[i].rot_mm for i in whole], axis=0)
-    far = max(float(np.hypot(*nn1)), float(np.hypot(*rot)))
-    if far > MAX_SHIFT_MM:
-        raise TrainingError(f"rezero: at the taught pose the model reads {far:.2f} mm, over "
-                            f"{MAX_SHIFT_MM:g} mm: the part is not where it was taught, or the "
-                            f"camera moved (teach again); the model is unchanged")
+    require_near_shift("the model", max(float(np.hypot(*nn1)), float(np.hypot(*rot))))
     shifted = dataclasses.replace(bundle, nn1=bundle.nn1.shifted(nn1),
                                   nn1_rot=bundle.nn1_rot.shifted(rot))
     shift = {"nn1": tuple(map(float, nn1)), "nn1_rot": tuple(map(float, rot))}
@@ -119,6 +108,36 @@ def rezero(bundle: ModelBundle, images: Sequence[np.ndarray]) -> Rezeroed:
     history = [*bundle.training.get("rezero", []), result.report()]
     return dataclasses.replace(result, bundle=dataclasses.replace(
         shifted, training={**bundle.training, "rezero": history}))
+
+
+def require_frames(images: Sequence[np.ndarray]) -> None:
+    """Refuse a re-zero without frames."""
+    if not images:
+        raise TrainingError("rezero: no frames")
+
+
+def require_seen_whole(whole: int, frames: int) -> None:
+    """Refuse a re-zero where the part was seen whole in fewer than MIN_FOUND_SHARE of the
+    frames at the taught pose."""
+    if whole < max(1, math.ceil(MIN_FOUND_SHARE * frames)):
+        raise TrainingError(f"rezero: the part was seen whole in only {whole} of {frames} "
+                            f"frames at the taught pose; put it where it was taught, uncovered")
+
+
+def require_near_turn(reader: str, deg: float) -> None:
+    """Refuse a re-zero where ``reader`` reads a turn over MAX_TURN_DEG at the taught pose."""
+    if abs(deg) > MAX_TURN_DEG:
+        raise TrainingError(f"rezero: at the taught pose {reader} reads {deg:.1f} deg, over "
+                            f"{MAX_TURN_DEG:g} deg: the part was turned since it was taught, "
+                            f"or the camera moved (teach again); the model is unchanged")
+
+
+def require_near_shift(reader: str, mm: float) -> None:
+    """Refuse a re-zero where ``reader`` reads a shift over MAX_SHIFT_MM at the taught pose."""
+    if mm > MAX_SHIFT_MM:
+        raise TrainingError(f"rezero: at the taught pose {reader} reads {mm:.2f} mm, over "
+                            f"{MAX_SHIFT_MM:g} mm: the part is not where it was taught, or the "
+                            f"camera moved (teach again); the model is unchanged")
 
 
 def _whole(percept) -> bool:

@@ -23,8 +23,13 @@ import numpy as np
 
 from calibration_free import angles
 from calibration_free.baselines.align.model import AlignModel
-from calibration_free.errors import TrainingError
-from calibration_free.rezero import MAX_SHIFT_MM, MAX_TURN_DEG, MIN_FOUND_SHARE, seen_whole
+from calibration_free.rezero import (
+    require_frames,
+    require_near_shift,
+    require_near_turn,
+    require_seen_whole,
+    seen_whole,
+)
 
 
 @dataclass(frozen=True)
@@ -55,30 +60,19 @@ def rezero_align(model: AlignModel, images: Sequence[np.ndarray]) -> AlignRezero
             MAX_SHIFT_MM or MAX_TURN_DEG there (the part is not where it was taught).
         ImageError: a frame of the wrong size or type.
     """
-    if not images:
-        raise TrainingError("rezero: no frames")
+    require_frames(images)
     front = model.front
     located = [front.locate(image) for image in images]
     whole = [(front.feature_frame(pre, loc), loc) for pre, loc in located
              if loc.ok and seen_whole(front.seen_share(loc.area_px))]
-    if len(whole) < max(1, math.ceil(MIN_FOUND_SHARE * len(images))):
-        raise TrainingError(f"rezero: the part was seen whole in only {len(whole)} of "
-                            f"{len(images)} frames at the taught pose; put it where it was "
-                            f"taught, uncovered")
+    require_seen_whole(len(whole), len(images))
     steps = np.array([model.step(model.register_silhouette(silhouette, loc))
                       for silhouette, loc in whole])
     s, c = np.mean([angles.encode(d, model.kappa) for d in steps[:, 2]], axis=0)
     read_deg = float(angles.decode(float(s), float(c), model.kappa))
-    if abs(read_deg) > MAX_TURN_DEG:
-        raise TrainingError(f"rezero: at the taught pose the servo reads {read_deg:.1f} deg, "
-                            f"over {MAX_TURN_DEG:g} deg: the part was turned since it was "
-                            f"taught, or the camera moved (teach again); the model is unchanged")
+    require_near_turn("the servo", read_deg)
     read_mm = tuple(float(v) for v in steps[:, :2].mean(axis=0))
-    if math.hypot(*read_mm) > MAX_SHIFT_MM:
-        raise TrainingError(f"rezero: at the taught pose the servo reads "
-                            f"{math.hypot(*read_mm):.2f} mm, over {MAX_SHIFT_MM:g} mm: the part "
-                            f"is not where it was taught, or the camera moved (teach again); "
-                            f"the model is unchanged")
+    require_near_shift("the servo", math.hypot(*read_mm))
     size = model.template.shape[0]
     template = np.mean([cv2.getRectSubPix(silhouette, (size, size), front.nominal_uv_px)
                         for silhouette, _ in whole], axis=0).astype(np.float32)
