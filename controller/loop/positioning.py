@@ -8,12 +8,13 @@ reached) or the loop budget is spent. "No object" / "ambiguous" stop without mov
 step passes the arm's safety layer; a rejected step stops the loop. A turn larger than the
 arm's ``max_step_deg`` (a part without symmetry may need up to 180 deg) is sent as several
 commands within it (``turn_in_commands``; or taken in part, and the next look measures the
-rest). A full look whose turn contradicts the last full loop's (the
-reading should have dropped by the turn taken, and it did not) stops the loop without moving
-(``inconsistent``): the rotation reading no longer follows the arm, so the next step cannot be
-trusted either. A look before the first full loop that finds no part, or little of it
-(something lies over the end nearer the camera, which looks at the part from an angle),
-turns the camera to the other side of the part and looks again (``look_around_deg``).
+rest). A full look whose turn contradicts the last full loop's (the reading should have
+dropped by the turn taken, and it did not) stops the loop without moving (``inconsistent``):
+the rotation reading no longer follows the arm, so the next step cannot be trusted either. A
+look before the first full loop that finds no part, or little of it (something lies over the
+end nearer the camera, which looks at the part from an angle), moves over the part where it
+was found and turns the camera to the other side of it, and looks again
+(``look_around_deg``).
 """
 
 from __future__ import annotations
@@ -252,12 +253,13 @@ class PositioningLoop:
                 # loop's step), so the turn does not swing the camera round a far part
                 found = tr.status == "ok" and not self._beyond_reach(tr)
                 shift = (tr.dx_mm, tr.dy_mm) if found else (0.0, 0.0)
-                record.estimates["look_around"] = (
-                    "the part not found" if tr.status != "ok" else
-                    f"{tr.seen_share:.0%} of the part seen") + (
-                    f": moving by the {math.hypot(*shift):.1f} mm read and turning"
-                    if found else ": turning") + \
-                    f" the tool by {cfg.look_around_deg:g} deg to look from another side"
+                seen = "the part not found" if tr.status != "ok" else \
+                    f"{tr.seen_share:.0%} of the part seen"
+                how = f"moving by the {math.hypot(*shift):.1f} mm read and turning" if found \
+                    else "turning"
+                record.estimates["look_around"] = \
+                    f"{seen}: {how} the tool by {cfg.look_around_deg:g} deg to look from " \
+                    "another side"
                 record.commanded = ToolStep(*shift, 0.0, cfg.look_around_deg)
                 refused = move(record, "around", 1.0, (t0, t1), frame.image)
                 if refused is not None:
@@ -353,9 +355,8 @@ class PositioningLoop:
         t3 = time.perf_counter()
         record.loops += cost
         record.error = self._error()
-        record.executed = sent[0].sent if count == 1 else ToolStep(
-            *(sum(getattr(m.sent, f) for m in sent)
-              for f in ("dx_mm", "dy_mm", "dz_mm", "dphi_deg")))
+        record.executed = ToolStep(*(sum(getattr(m.sent, f) for m in sent)
+                                     for f in ("dx_mm", "dy_mm", "dz_mm", "dphi_deg")))
         record.clipped = any(m.clipped for m in sent)
         record.pose_after = sent[-1].pose
         self._write(record, kind, (*clock[:2], t2, t3), image)
