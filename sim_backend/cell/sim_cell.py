@@ -24,7 +24,7 @@ import numpy as np
 
 from drivers.core.errors import MotionRejectedError
 from drivers.core.parts import APPROACH_HEIGHT_MM
-from drivers.core.pose import Pose, rot_z, wrap_deg
+from drivers.core.pose import Pose, rot_y, rot_z, wrap_deg
 from sim_backend.cell import (
     contact,
     grasp_physics,
@@ -92,12 +92,6 @@ def _card_slope(u_mm: np.ndarray, z_mm: np.ndarray, length_mm: float) -> float:
         if np.all(height >= z_mm[below] - 1e-6):
             return slope
     raise ValueError("the card is too short to lie over this part")
-
-
-def _rot_y(angle_rad: float) -> np.ndarray:
-    """Rotation about y by ``angle_rad`` (3x3): x turns towards -z."""
-    c, s = math.cos(angle_rad), math.sin(angle_rad)
-    return np.array([[c, 0.0, s], [0.0, 1.0, 0.0], [-s, 0.0, c]])
 
 
 def _translation(x_mm: float, y_mm: float, z_mm: float) -> np.ndarray:
@@ -320,7 +314,7 @@ class SimCell:
         length = OCCLUDER_LENGTH_MM / 2.0
         pose = _translation(inner + side * (length * math.cos(slope) + half_t * math.sin(slope)),
                             0.0, length * math.sin(slope) + half_t * math.cos(slope) + 0.2)
-        pose[:3, :3] = _rot_y(side * slope)
+        pose[:3, :3] = rot_y(side * slope)
         half = np.array([OCCLUDER_LENGTH_MM / 2.0, self.part.grasp_width_mm / 2.0, half_t])
         visual = robot_model.visual_shape(meshes.box(half, meshes.BODY_U), cid,
                                           [*OCCLUDER_COLOR, 1.0])
