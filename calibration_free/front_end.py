@@ -21,6 +21,7 @@ from calibration_free.kernels import cut_levels, saturation_image
 from calibration_free.localise import (
     AREA_TOLERANCE,
     NO_ELONGATION_LIMIT,
+    ColourEdge,
     Localisation,
     Polarity,
     localise,
@@ -90,6 +91,9 @@ class FrontEnd:
             pairs from the NN2 grid's images (``outline.turned_outlines``): from an angle,
             a turned part shows other faces. Empty: not known (model files written before
             them); the taught outline alone is fitted.
+        edge_gamma: the camera's output gamma, with which the part's edge is read from the
+            frame's colour (``localise.colour_centre``); 0: from the localisation channel's
+            grey levels (``localise.subpixel_centre``; model files written before it).
     """
 
     frame_height_px: int
@@ -109,8 +113,15 @@ class FrontEnd:
     taught_area_px: float | None = None
     taught_outline_px: tuple[tuple[float, float], ...] | None = None
     turned_outlines_px: tuple[tuple[float, tuple[tuple[float, float], ...]], ...] = ()
+    edge_gamma: float = 0.0
 
     def __post_init__(self) -> None:
+        gamma = self.edge_gamma
+        if isinstance(gamma, bool) or not isinstance(gamma, (int, float)) or not (
+                gamma == 0.0 or 1.0 <= gamma <= 3.0):
+            raise ConfigError(f"front end: edge_gamma must be 0 (grey levels) or a number in "
+                              f"1..3, got {gamma!r}")
+        object.__setattr__(self, "_edge", ColourEdge(float(gamma)) if gamma else None)
         if self.taught_outline_px is not None:
             object.__setattr__(self, "taught_outline_px",
                                _outline(self.taught_outline_px, "taught_outline_px"))
@@ -243,7 +254,8 @@ class FrontEnd:
         Args:
             preprocessed: HxW float32, what ``preprocess`` returned for the frame.
             image: the RGB frame itself: with it (and a learned ``chroma``), of several
-                candidate blobs those of the part's colour are preferred.
+                candidate blobs those of the part's colour are preferred, and the centre is
+                read from its colour (with ``edge_gamma``).
 
         Returns:
             The Localisation (ok, no_object or ambiguous, with the reason).
@@ -251,10 +263,11 @@ class FrontEnd:
         check = None
         if image is not None and self.chroma is not None:
             check = colour_check(image, self.chroma, self.chroma_tolerance)
+        edge = self.edge if image is not None else None
         found = localise(preprocessed, self.threshold, self.expected_area_px,
                          polarity=self.polarity, area_tolerance=self.area_tolerance,
                          max_elongation=self.max_elongation, expected_uv=self.nominal_uv_px,
-                         blob_check=check)
+                         blob_check=check, image=image, edge=edge)
         if found.status != "no_object" or self.taught_outline_px is None \
                 or self.max_elongation == NO_ELONGATION_LIMIT:
             return found
@@ -265,7 +278,8 @@ class FrontEnd:
         cut = localise(preprocessed, self.threshold, self.expected_area_px,
                        polarity=self.polarity, area_tolerance=self.area_tolerance,
                        max_elongation=CUT_ELONGATION * self.max_elongation,
-                       expected_uv=self.nominal_uv_px, blob_check=check)
+                       expected_uv=self.nominal_uv_px, blob_check=check, image=image,
+                       edge=edge)
         if cut.ok and cut_share(preprocessed, cut.part_mask, cut.u_px, cut.v_px,
                                 self.threshold) >= MIN_CUT_SHARE:
             return cut
@@ -285,6 +299,11 @@ class FrontEnd:
         """
         preprocessed = self.preprocess(image)
         return preprocessed, self.localise(preprocessed, image)
+
+    @property
+    def edge(self) -> ColourEdge | None:
+        """How the part's edge is read from the frame's colour; None: from grey levels."""
+        return self._edge
 
     @property
     def outlines(self) -> tuple[tuple[tuple[float, float], ...], ...]:
@@ -323,14 +342,15 @@ class FrontEnd:
                                  "taught_outline_px": None if self.taught_outline_px is None
                                  else [list(p) for p in self.taught_outline_px],
                                  "turned_outlines_px": [[t, [list(p) for p in o]]
-                                                        for t, o in self.turned_outlines_px]}}
+                                                        for t, o in self.turned_outlines_px],
+                                 "edge_gamma": self.edge_gamma}}
 
     @classmethod
     def from_info(cls, info: Mapping[str, Any]) -> FrontEnd:
         """Inverse of ``to_info``. ``localisation.channel``, ``nominal_uv_px``, ``chroma``,
-        ``feature_floor``, ``feature_ceiling``, ``taught_area_px``, ``taught_outline_px`` and
-        ``turned_outlines_px`` may be absent (model files written before they were stored):
-        "max", None, None, 0, 0, None, None and none.
+        ``feature_floor``, ``feature_ceiling``, ``taught_area_px``, ``taught_outline_px``,
+        ``turned_outlines_px`` and ``edge_gamma`` may be absent (model files written before
+        they were stored): "max", None, None, 0, 0, None, None, none and 0.
 
         Args:
             info: a model file's JSON (at least ``frame_px``, ``intensity``,
@@ -354,7 +374,8 @@ class FrontEnd:
                    float(loc.get("feature_floor", 0.0)),
                    float(loc.get("feature_ceiling", 0.0)),
                    None if taught is None else float(taught),
-                   loc.get("taught_outline_px"), loc.get("turned_outlines_px", ()))
+                   loc.get("taught_outline_px"), loc.get("turned_outlines_px", ()),
+                   loc.get("edge_gamma", 0.0))
 
 
 def _outline(points: Any, name: str) -> tuple[tuple[float, float], ...]:

@@ -133,6 +133,101 @@ def coverage_moments(window: np.ndarray, core: np.ndarray, band: np.ndarray,
     return m00, m10, m01
 
 
+@njit("UniTuple(float64, 3)(uint8[:, :, :], uint8[:, :], uint8[:, :], uint8[:, :], "
+      "uint8[:, :], float64[::1], float64)", cache=True, nogil=True, error_model="numpy")
+def colour_coverage_moments(rgb: np.ndarray, blob: np.ndarray, core: np.ndarray,
+                            band: np.ndarray, ring: np.ndarray, linear: np.ndarray,
+                            min_contrast: float):  # pragma: no cover
+    """Moments (weight, sum of u * weight, sum of v * weight; window coordinates) of the
+    part's coverage read from each pixel's colour (``localise.colour_centre``): 1 in ``core``;
+    in the rest of ``band``, with the pixel's linear colour p = alpha * c + beta * b (c the
+    unit direction of the part's colour f, the mean of the ``core`` pixels in the 5x5 square
+    around it; b the background's colour, the mean of the ``ring`` pixels there; without
+    one there, of all of them), 1 - beta on the ``blob`` (the table's share) and beyond it
+    the mean of 1 - beta and alpha / |f| (the part's share); 0 elsewhere. ``linear`` maps
+    grey levels to linear light. The weight is not cut to 0..1 (the camera's noise around the
+    part's edge would then only add to it, most where the background is dark, and move the
+    centre that way), only kept within -1..2. Where the background's colour has less than
+    ``min_contrast`` across the part's direction (a part of the table's colour) nothing is
+    read: all zero."""
+    height, width = core.shape
+    n_in = n_out = 0
+    fg0 = np.zeros(3)
+    bg0 = np.zeros(3)
+    for i in range(height):
+        for j in range(width):
+            if core[i, j]:
+                n_in += 1
+                for k in range(3):
+                    fg0[k] += linear[rgb[i, j, k]]
+            elif ring[i, j]:
+                n_out += 1
+                for k in range(3):
+                    bg0[k] += linear[rgb[i, j, k]]
+    if n_in == 0 or n_out == 0:
+        return 0.0, 0.0, 0.0
+    fg0 /= n_in
+    bg0 /= n_out
+    fg = np.empty(3)
+    bg = np.empty(3)
+    m00 = m10 = m01 = 0.0
+    for i in range(height):
+        for j in range(width):
+            if core[i, j]:
+                w = 1.0
+            elif band[i, j]:
+                nf = nb = 0
+                fg[:] = 0.0
+                bg[:] = 0.0
+                for y in range(max(i - 2, 0), min(i + 3, height)):
+                    for x in range(max(j - 2, 0), min(j + 3, width)):
+                        if core[y, x]:
+                            nf += 1
+                            for k in range(3):
+                                fg[k] += linear[rgb[y, x, k]]
+                        elif ring[y, x]:
+                            nb += 1
+                            for k in range(3):
+                                bg[k] += linear[rgb[y, x, k]]
+                if nf:
+                    fg /= nf
+                else:
+                    fg[:] = fg0
+                if nb:
+                    bg /= nb
+                else:
+                    bg[:] = bg0
+                norm = np.sqrt(fg[0] * fg[0] + fg[1] * fg[1] + fg[2] * fg[2])
+                if norm <= 0.0:
+                    return 0.0, 0.0, 0.0
+                cb = pc = pb = bb = 0.0
+                for k in range(3):
+                    c = fg[k] / norm
+                    p = linear[rgb[i, j, k]]
+                    cb += c * bg[k]
+                    pc += p * c
+                    pb += p * bg[k]
+                    bb += bg[k] * bg[k]
+                across = bb - cb * cb
+                if not across >= min_contrast * min_contrast:
+                    return 0.0, 0.0, 0.0
+                beta = (pb - cb * pc) / across
+                w = 1.0 - beta
+                if not blob[i, j]:
+                    # mostly table: a shadow's edge along the part's darkens the table here
+                    # below what the ring shows, which the table's share alone reads as part
+                    w = 0.5 * (w + (pc - beta * cb) / norm)
+                # far beyond 0..1 is no mix of the two colours (a glint, a speck): bounded so
+                # that one such pixel cannot move the centre; within, the noise stays unbiased
+                w = min(max(w, -1.0), 2.0)
+            else:
+                continue
+            m00 += w
+            m10 += w * j
+            m01 += w * i
+    return m00, m10, m01
+
+
 @njit("void(float32[:, ::1], float32, float32, uint8[:, ::1], int64, int64, int64)",
       cache=True, nogil=True, error_model="numpy")
 def cut_levels(roi: np.ndarray, low: np.float32, high: np.float32, part_mask: np.ndarray,

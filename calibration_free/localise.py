@@ -27,7 +27,7 @@ import cv2
 import numpy as np
 
 from calibration_free.errors import ImageError
-from calibration_free.kernels import coverage_moments, object_mask
+from calibration_free.kernels import colour_coverage_moments, coverage_moments, object_mask
 from drivers.core.errors import ConfigError
 
 Status = Literal["ok", "no_object", "ambiguous"]
@@ -186,13 +186,88 @@ _KERNEL_3 = np.ones((3, 3), np.uint8)
 _KERNEL_5 = np.ones((5, 5), np.uint8)
 _KERNEL_7 = np.ones((7, 7), np.uint8)
 
+# The background's colour must differ from the part's by this much across the part's colour
+# (linear light, 0..1) for ``colour_centre`` to read a pixel's share of it: a part of the
+# table's colour has none, and the grey-level coverage is read instead.
+MIN_COLOUR_CONTRAST = 0.002
+
+
+@dataclass(frozen=True)
+class ColourEdge:
+    """How the part's edge is read from the frame's colour (``colour_centre``).
+
+    Attributes:
+        gamma: the camera's output gamma: a delivered grey level g is linear light
+            (g / 255) ** gamma, in which a pixel's colour is the mix of what it covers.
+    """
+
+    gamma: float
+    linear: np.ndarray = field(init=False, repr=False, compare=False)
+
+    def __post_init__(self) -> None:
+        if isinstance(self.gamma, bool) or not isinstance(self.gamma, (int, float)) \
+                or not 1.0 <= self.gamma <= 3.0:
+            raise ConfigError(f"camera gamma must be a number in 1..3, got {self.gamma!r}")
+        table = (np.arange(256, dtype=np.float64) / 255.0) ** float(self.gamma)
+        object.__setattr__(self, "linear", table)
+
+
+def colour_centre(image: np.ndarray, edge: ColourEdge, u_px: float, v_px: float,
+                  area_px: float, part_mask: np.ndarray) -> tuple[float, float] | None:
+    """The blob's centre with each edge pixel weighted by the part's share of its colour.
+
+    A pixel on the part's outline holds part and table mixed by how much of it each covers,
+    in linear light. The grey-level coverage of ``subpixel_centre`` reads that mix against
+    one level for the part and one for the table; under a low side lamp the part's rounded
+    edges are lit on one side and dark on the other, so the same outline reads as more part on
+    the lit side and less on the dark one, and its centre moves by a quarter to half a pixel
+    towards the lamp. The table's share does not depend on how the part's face is lit: with the
+    part's colour direction c (its pixels just inside) and the table's colour b (its pixels
+    just outside), the pixel p = alpha * c + beta * b, and the part covers 1 - beta. Beyond
+    the blob, where a pixel is mostly table, a cast shadow whose edge runs along the part's
+    can darken the table next to the part below what the ring shows; there the part's own
+    share (alpha over the part's brightness just inside) is averaged in
+    (``kernels.colour_coverage_moments``). The band read runs from a pixel inside the
+    blob's outline to one outside it (the blob's threshold cuts the edge's ramp near its
+    middle).
+
+    Returns None where this cannot be read (no background pixels around the blob, or a
+    background of the part's own colour): the caller takes ``subpixel_centre``.
+    """
+    height, width = part_mask.shape
+    half = int(math.ceil(0.75 * math.sqrt(area_px))) + 3
+    cu, cv_ = int(round(u_px)), int(round(v_px))
+    x0, x1 = max(cu - half, 0), min(cu + half + 1, width)
+    y0, y1 = max(cv_ - half, 0), min(cv_ + half + 1, height)
+    blob = part_mask[y0:y1, x0:x1]
+    band = cv2.dilate(blob, _KERNEL_3)
+    m00, m10, m01 = colour_coverage_moments(
+        image[y0:y1, x0:x1], blob, cv2.erode(blob, _KERNEL_3), band,
+        cv2.subtract(cv2.dilate(blob, _KERNEL_5), band), edge.linear, MIN_COLOUR_CONTRAST)
+    if not m00 > 0:
+        return None
+    return x0 + m10 / m00, y0 + m01 / m00
+
+
+def _centre(normalised: np.ndarray, polarity: Polarity, u_px: float, v_px: float,
+            area_px: float, part_mask: np.ndarray, image: np.ndarray | None,
+            edge: ColourEdge | None) -> tuple[float, float]:
+    """``colour_centre`` where the frame and its ``edge`` are given and it reads, else
+    ``subpixel_centre``."""
+    if image is not None and edge is not None:
+        found = colour_centre(image, edge, u_px, v_px, area_px, part_mask)
+        if found is not None:
+            return found
+    return subpixel_centre(normalised, polarity, u_px, v_px, area_px, part_mask)
+
 
 def localise(normalised: np.ndarray, threshold: float, expected_area_px: float | None = None,
              *, polarity: Polarity = "bright", area_tolerance: float = AREA_TOLERANCE,
              min_blob_px: int = MIN_BLOB_PX,
              max_elongation: float = NO_ELONGATION_LIMIT,
              expected_uv: tuple[float, float] | None = None,
-             blob_check: BlobCheck | None = None) -> Localisation:
+             blob_check: BlobCheck | None = None, image: np.ndarray | None = None,
+             edge: ColourEdge | None = None) -> Localisation:
     """Find the object's centre in a normalised image: the blob of the part's area and shape
     in the binarised image (its histograms, or its connected components), its centre refined
     to sub-pixel by the grey levels along its outline (``subpixel_centre``).
@@ -213,6 +288,8 @@ def localise(normalised: np.ndarray, threshold: float, expected_area_px: float |
         blob_check: where several blobs of the part's area and shape are measured (the
             components path), those this accepts are preferred; a lone candidate is taken
             whatever it says.
+        image, edge: the HxWx3 uint8 RGB frame ``normalised`` was made from, and how its
+            colour is read: with both, the centre is refined by ``colour_centre``.
 
     Returns:
         The Localisation; see its docstring for the three statuses.
@@ -242,14 +319,15 @@ def localise(normalised: np.ndarray, threshold: float, expected_area_px: float |
                 max_elongation == NO_ELONGATION_LIMIT
                 or _elongation(s_uu / area - u * u, s_vv / area - v * v,
                                s_uv / area - u * v) <= max_elongation):
-            u, v = subpixel_centre(normalised, polarity, u, v, area, mask)
+            u, v = _centre(normalised, polarity, u, v, area, mask, image, edge)
             return Localisation("ok", u, v, area, "", "histogram", mask)
     loc, labels, label = _by_components(mask, expected_area_px, area_tolerance, min_blob_px,
                                         max_elongation, expected_uv, blob_check)
     if loc.status != "ok":
         return loc
     part_mask = cv2.compare(labels, label, cv2.CMP_EQ)
-    u, v = subpixel_centre(normalised, polarity, loc.u_px, loc.v_px, loc.area_px, part_mask)
+    u, v = _centre(normalised, polarity, loc.u_px, loc.v_px, loc.area_px, part_mask, image,
+                   edge)
     return dataclasses.replace(loc, u_px=u, v_px=v, part_mask=part_mask)
 
 

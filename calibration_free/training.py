@@ -30,6 +30,7 @@ from calibration_free.errors import TrainingError
 from calibration_free.front_end import FEATURE_CEILING, FEATURE_FLOOR, FrontEnd, learn_chroma
 from calibration_free.gabor import GaborBank, GaborConfig
 from calibration_free.localise import (
+    ColourEdge,
     Localisation,
     Polarity,
     binarise,
@@ -168,7 +169,8 @@ def _otsu(images: list[np.ndarray]) -> tuple[float, float]:
 
 
 def prepare_training(sets: dict[str, Dataset], polarity: Polarity = "bright",
-                     channel: Channel | Literal["auto"] = "max") -> PreparedSets:
+                     channel: Channel | Literal["auto"] = "max",
+                     edge_gamma: float = 0.0) -> PreparedSets:
     """The front end every system trains first: intensity statistics, localisation channel
     and threshold, expected area and shape of the part, and the localisation of every image.
 
@@ -177,6 +179,8 @@ def prepare_training(sets: dict[str, Dataset], polarity: Polarity = "bright",
         polarity: "bright" if the object is brighter than the table after max(R, G, B).
         channel: "max", "saturation", or "auto": the channel in which the part stands out
             from its background best (Otsu's separability on the training images).
+        edge_gamma: the camera's output gamma: the part's edge is read from the frame's colour
+            (``localise.colour_centre``); 0: from the channel's grey levels.
 
     Raises:
         TrainingError: a set has no images, the image sizes differ, an image is flat, the
@@ -212,6 +216,8 @@ def prepare_training(sets: dict[str, Dataset], polarity: Polarity = "bright",
     logger.info("localisation channel %s (separability %s)", channel,
                 ", ".join(f"{c} {v[1]:.2f}" for c, v in otsu.items()))
 
+    edge = ColourEdge(edge_gamma) if edge_gamma else None
+
     def find(name: str, area: float | None) -> list[Localisation]:
         return [localise(n, threshold, area, polarity=polarity) for n in located[name]]
 
@@ -231,8 +237,9 @@ def prepare_training(sets: dict[str, Dataset], polarity: Polarity = "bright",
               for ns in located.values() for n in ns]
     max_elongation = max(shapes) * ELONGATION_MARGIN
     found = {name: [localise(n, threshold, expected_area, polarity=polarity,
-                             area_tolerance=tolerance, max_elongation=max_elongation)
-                    for n in located[name]]
+                             area_tolerance=tolerance, max_elongation=max_elongation,
+                             image=im, edge=edge)
+                    for n, im in zip(located[name], sets[name].images, strict=True)]
              for name in sets}
     usable = {name: _usable(found[name], name) for name in sets}
     # The part's colour, so that a blob of its size and shape but another colour is not taken
@@ -261,7 +268,8 @@ def prepare_training(sets: dict[str, Dataset], polarity: Polarity = "bright",
                      feature_floor=FEATURE_FLOOR if channel == "saturation" else 0.0,
                      feature_ceiling=FEATURE_CEILING if channel == "saturation" else 0.0,
                      taught_area_px=float(np.mean(taught)) if taught else None,
-                     taught_outline_px=outline, turned_outlines_px=turned)
+                     taught_outline_px=outline, turned_outlines_px=turned,
+                     edge_gamma=float(edge_gamma))
     return PreparedSets(front, located, found, usable, time.perf_counter() - start)
 
 
@@ -395,7 +403,7 @@ def train_bundle(nn1_data: Dataset, nn2_data: Dataset, *, object_kind: str, kapp
                  nn1_epochs: int = NN1_EPOCHS, nn2_epochs: int = NN2_EPOCHS,
                  nn2_weight_decay: float | None = None,
                  localisation_channel: Channel | Literal["auto"] = "auto",
-                 fine_axis: bool = True) -> ModelBundle:
+                 fine_axis: bool = True, edge_gamma: float = 0.0) -> ModelBundle:
     """Train NN1 and NN2 from image datasets and pack everything into a ModelBundle.
 
     Steps: the front end (``prepare_training``: intensity statistics of the max-channel
@@ -427,6 +435,9 @@ def train_bundle(nn1_data: Dataset, nn2_data: Dataset, *, object_kind: str, kapp
             and background better on the training images).
         fine_axis: for an elongated part (screw, ledge), fit the map from its long axis to
             the turn near the taught pose (``calibration_free.axis``); False: NN2 alone.
+        edge_gamma: the camera's output gamma, with which the part's centre is read from the
+            colour along its edge (``localise.colour_centre``); 0: from the localisation
+            channel's grey levels.
 
     Returns:
         The bundle: the front end (with the taught pose's image position), the networks and
@@ -441,7 +452,7 @@ def train_bundle(nn1_data: Dataset, nn2_data: Dataset, *, object_kind: str, kapp
     gabor = gabor or GaborConfig()
     pose = check_part(object_kind, kappa, nominal_pose)
     sets = training_sets(nn1_data, nn2_data, nn1_extra)
-    prep = prepare_training(sets, polarity, localisation_channel)
+    prep = prepare_training(sets, polarity, localisation_channel, edge_gamma)
     uv, labels = nn1_samples(sets, prep)
     uvsc, dxdy, at_nominal = _translation_samples(uv, labels, kappa)
     if not at_nominal.any():

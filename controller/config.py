@@ -116,7 +116,13 @@ class PerceptionConfig:
     nn1_uses_nn2_set: also train NN1 on the NN2 grid's images (they cost no extra motion and
     make NN1 precise near the nominal pose, where the loop's fixed point is);
     axis: for an elongated part (screw, ledge) the turn near the taught pose is read from the
-    silhouette's long axis (``calibration_free.axis``; false: NN2 alone).
+    silhouette's long axis (``calibration_free.axis``; false: NN2 alone);
+    edge_coverage: how the part's centre reads the pixels along its outline: ``colour``, by
+    the table's share of each pixel's colour (unchanged by how a lamp lights the part's
+    edges, ``calibration_free.localise.colour_centre``), or ``grey``, by the localisation
+    channel's grey level; camera_gamma: the camera's output gamma (``colour`` reads in linear
+    light: a delivered grey level g is (g / 255) ** camera_gamma; 2.2 for an sRGB-like
+    camera, 1 for a linear one).
     """
 
     gabor: GaborConfig = GaborConfig()
@@ -129,10 +135,17 @@ class PerceptionConfig:
     seed: int = 0
     nn1_uses_nn2_set: bool = True
     axis: bool = True
+    edge_coverage: Literal["colour", "grey"] = "colour"
+    camera_gamma: float = field(default=2.2, metadata={"min": 1.0, "max": 3.0})
 
     def __post_init__(self) -> None:
         if not 1 <= len(self.nn2_hidden) <= 8:  # with <= 4096 units each: fits in memory
             raise ValueError(f"nn2_hidden: 1 to 8 hidden layers, got {len(self.nn2_hidden)}")
+
+    @property
+    def edge_gamma(self) -> float:
+        """The gamma the part's edge is read with (``FrontEnd.edge_gamma``): 0 for ``grey``."""
+        return float(self.camera_gamma) if self.edge_coverage == "colour" else 0.0
 
 
 @dataclass(frozen=True)

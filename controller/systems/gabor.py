@@ -105,7 +105,7 @@ class GaborSystem(VisionSystem):
             nn2_weight_decay=perception_cfg.nn2_weight_decay,
             localisation_channel=perception_cfg.localisation_channel, seed=perception_cfg.seed,
             nn1_extra=nn2 if perception_cfg.nn1_uses_nn2_set else None,
-            fine_axis=perception_cfg.axis)
+            fine_axis=perception_cfg.axis, edge_gamma=perception_cfg.edge_gamma)
         return TrainedModel(cls.name, bundle, time.perf_counter() - t0, len(nn1) + len(nn2),
                             bundle.gabor.n_filters)
 

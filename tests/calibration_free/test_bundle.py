@@ -144,7 +144,8 @@ def test_a_file_in_the_version_4_layout_loads_and_is_still_written(bundle, cell,
                                            list(p) for p in bundle.front.taught_outline_px],
                                        "turned_outlines_px": [
                                            [t, [list(p) for p in o]]
-                                           for t, o in bundle.front.turned_outlines_px]}
+                                           for t, o in bundle.front.turned_outlines_px],
+                                       "edge_gamma": bundle.front.edge_gamma}
     assert written["frame_px"] == expected["frame_px"]
     assert written["intensity"] == expected["intensity"]
 

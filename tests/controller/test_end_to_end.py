@@ -137,15 +137,20 @@ def test_cli_rezero_takes_the_servos_template_again(trained, tmp_path, capsys):
 def test_cli_rezero_moves_the_zero_to_the_new_light_and_refuses_a_moved_part(trained,
                                                                               tmp_path,
                                                                               capsys):
-    """Trained in good light, the cube's nets read a few tenths of a millimetre at the taught
-    pose under the poor-light preset; `finepos rezero` there makes them read zero, and with
-    the part moved 4 mm it changes nothing."""
+    """Trained in good light with the edge read in grey levels, the cube's nets read a few
+    tenths of a millimetre at the taught pose under the poor-light preset; `finepos rezero`
+    there makes them read zero, and with the part moved 4 mm it changes nothing."""
     import shutil
 
     state = tmp_path / "state"
     shutil.copytree(trained, state)
+    grey = "perception:\n  edge_coverage: grey\n"
+    (tmp_path / "grey.yaml").write_text(grey)
+    assert main(["train", "--state-dir", str(state), "--config",
+                 str(tmp_path / "grey.yaml")]) == 0
+    capsys.readouterr()
     poor = tmp_path / "poor.yaml"
-    poor.write_text("scene:\n  lighting:\n    preset: poor\n")
+    poor.write_text(grey + "scene:\n  lighting:\n    preset: poor\n")
     model = state / "model-gabor.fpm"
     assert main(["rezero", "--state-dir", str(state), "--config", str(poor)]) == 0
     out = json.loads(capsys.readouterr().out)
@@ -156,7 +161,8 @@ def test_cli_rezero_moves_the_zero_to_the_new_light_and_refuses_a_moved_part(tra
     assert math.hypot(*again["shift_mm"]["nn1"]) < 0.05, again  # it reads zero there now
     written = model.read_bytes()
     moved = tmp_path / "moved.yaml"
-    moved.write_text("scene:\n  lighting:\n    preset: poor\n  object:\n    x_mm: 304.0\n")
+    moved.write_text(grey + "scene:\n  lighting:\n    preset: poor\n  object:\n"
+                     "    x_mm: 304.0\n")
     assert main(["rezero", "--state-dir", str(state), "--config", str(moved)]) != 0
     err = capsys.readouterr().err.strip().splitlines()
     assert "the part is not where it was taught" in err[-1]

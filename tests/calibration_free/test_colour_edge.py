@@ -1,0 +1,177 @@
+"""The part's centre read from the colour along its edge (``localise.colour_centre``)."""
+
+from __future__ import annotations
+
+import cv2
+import numpy as np
+import pytest
+
+from calibration_free.front_end import FrontEnd
+from calibration_free.kernels import colour_coverage_moments, saturation_image
+from calibration_free.localise import (
+    MIN_COLOUR_CONTRAST,
+    ColourEdge,
+    colour_centre,
+    localise,
+    subpixel_centre,
+)
+from calibration_free.preprocess import IntensityStats
+from drivers.core.errors import ConfigError
+
+SAMPLES = 16  # renderer samples per pixel side
+YELLOW = (0.9, 0.7, 0.05)  # the part's colour, linear light
+THRESHOLD = 110.0  # saturation level the blob is cut at
+
+
+def square_frame(u0: float, v0: float, *, lit: float = 1.6, dark: float = 0.15,
+                 table: float = 0.2, part=YELLOW, noise: float = 0.0,
+                 gamma: float = 2.2) -> np.ndarray:
+    """A 128x96 frame of a 30 px square part centred on (u0, v0) on a grey table, shaded as a
+    low lamp from the left shades a part with rounded edges: its left edge lit ``lit`` times
+    its colour, its right edge ``dark`` times, the change steepest at the edges. Each pixel
+    integrates the light over its area (linear light), then the camera's gamma and noise."""
+    height, width, half = 96, 128, 15.0
+    rows, cols = np.mgrid[0:height * SAMPLES, 0:width * SAMPLES]
+    x, y = (cols + 0.5) / SAMPLES - 0.5, (rows + 0.5) / SAMPLES - 0.5
+    inside = (np.abs(x - u0) <= half) & (np.abs(y - v0) <= half)
+    t = np.clip((x - (u0 - half)) / (2 * half), 0.0, 1.0)
+    shade = dark + (lit - dark) * (1 - t) ** 3 + 0.3 * (1 - np.abs(2 * t - 1))
+    linear = np.stack([np.where(inside, c * shade, table) for c in part], axis=-1)
+    frame = cv2.resize(linear, (width, height), interpolation=cv2.INTER_AREA)
+    out = np.clip(frame, 0.0, 1.0) ** (1.0 / gamma) * 255.0
+    if noise:
+        out = out + np.random.default_rng(7).normal(0.0, noise, out.shape)
+    return np.clip(out + 0.5, 0, 255).astype(np.uint8)
+
+
+def _centres(image: np.ndarray):
+    saturation = saturation_image(np.ascontiguousarray(image))
+    loc = localise(saturation, THRESHOLD)
+    assert loc.ok
+    grey = subpixel_centre(saturation, "bright", loc.u_px, loc.v_px, loc.area_px,
+                           loc.part_mask)
+    colour = colour_centre(image, ColourEdge(2.2), loc.u_px, loc.v_px, loc.area_px,
+                           loc.part_mask)
+    return loc, grey, colour
+
+
+@pytest.mark.parametrize(("u0", "v0"), [(60.3, 45.7), (63.62, 48.15)])
+@pytest.mark.parametrize("noise", [0.0, 2.0])
+def test_a_part_lit_from_one_side_is_centred_where_it_lies(u0, v0, noise):
+    _, grey, colour = _centres(square_frame(u0, v0, noise=noise))
+    # the grey levels of the lit edge read as more part, of the dark edge as less
+    assert grey[0] - u0 < -0.1
+    assert colour is not None
+    assert abs(colour[0] - u0) < 0.05 and abs(colour[1] - v0) < 0.05
+
+
+def test_evenly_lit_part_reads_the_same_either_way():
+    u0, v0 = 61.4, 47.3
+    _, grey, colour = _centres(square_frame(u0, v0, lit=1.0, dark=1.0))
+    assert abs(colour[0] - u0) < 0.05 and abs(colour[1] - v0) < 0.05
+    assert abs(grey[0] - u0) < 0.07 and abs(grey[1] - v0) < 0.07
+
+
+def test_with_localise_and_the_frame_the_colour_centre_is_taken():
+    image = square_frame(60.3, 45.7)
+    saturation = saturation_image(np.ascontiguousarray(image))
+    _, _, colour = _centres(image)
+    loc = localise(saturation, THRESHOLD, image=image, edge=ColourEdge(2.2))
+    assert (loc.u_px, loc.v_px) == pytest.approx(colour, abs=1e-9)
+
+
+def test_a_part_of_the_tables_colour_falls_back_to_grey_levels():
+    # a grey part brighter than a grey table: no colour tells them apart
+    image = square_frame(60.3, 45.7, part=(0.5, 0.5, 0.5), lit=1.0, dark=1.0)
+    grey_levels = cv2.cvtColor(image, cv2.COLOR_RGB2GRAY).astype(np.float32)
+    loc = localise(grey_levels, 150.0)
+    assert loc.ok
+    assert colour_centre(image, ColourEdge(2.2), loc.u_px, loc.v_px, loc.area_px,
+                         loc.part_mask) is None
+    fallback = localise(grey_levels, 150.0, image=image, edge=ColourEdge(2.2))
+    assert (fallback.u_px, fallback.v_px) == pytest.approx((loc.u_px, loc.v_px), abs=1e-9)
+
+
+def _reference_colour_moments(rgb, blob, core, band, ring, linear, min_contrast):
+    """The kernel's formula in numpy, one pixel at a time."""
+    lin = linear[rgb]
+    fg0, bg0 = lin[core > 0].mean(axis=0), lin[ring > 0].mean(axis=0)
+    height, width = core.shape
+    m = np.zeros(3)
+    for i in range(height):
+        for j in range(width):
+            if core[i, j]:
+                w = 1.0
+            elif band[i, j]:
+                ys, xs = slice(max(i - 2, 0), i + 3), slice(max(j - 2, 0), j + 3)
+                near_core = core[ys, xs] > 0
+                near_ring = (ring[ys, xs] > 0) & ~near_core
+                fg = lin[ys, xs][near_core].mean(axis=0) if near_core.any() else fg0
+                bg = lin[ys, xs][near_ring].mean(axis=0) if near_ring.any() else bg0
+                c = fg / np.linalg.norm(fg)
+                across = bg @ bg - (c @ bg) ** 2
+                if across < min_contrast ** 2:
+                    return 0.0, 0.0, 0.0
+                p = lin[i, j]
+                beta = (p @ bg - (c @ bg) * (p @ c)) / across
+                w = 1.0 - beta
+                if not blob[i, j]:
+                    w = 0.5 * (w + (p @ c - beta * (c @ bg)) / np.linalg.norm(fg))
+                w = float(np.clip(w, -1.0, 2.0))
+            else:
+                continue
+            m += (w, w * j, w * i)
+    return tuple(m)
+
+
+def test_colour_coverage_moments_match_the_numpy_formula():
+    image = square_frame(60.3, 45.7, noise=3.0)
+    loc, _, _ = _centres(image)
+    window = (slice(20, 75), slice(35, 90))
+    blob = loc.part_mask[window]
+    core = cv2.erode(blob, np.ones((3, 3), np.uint8))
+    band = cv2.dilate(blob, np.ones((3, 3), np.uint8))
+    ring = cv2.subtract(cv2.dilate(blob, np.ones((5, 5), np.uint8)), band)
+    linear = ColourEdge(2.2).linear
+    got = colour_coverage_moments(image[window], blob, core, band, ring, linear,
+                                  MIN_COLOUR_CONTRAST)
+    want = _reference_colour_moments(image[window], blob, core, band, ring, linear,
+                                      MIN_COLOUR_CONTRAST)
+    np.testing.assert_allclose(got, want, rtol=1e-9)
+    empty = np.zeros_like(core)
+    assert colour_coverage_moments(image[window], blob, empty, band, ring, linear,
+                                   MIN_COLOUR_CONTRAST) == (0.0, 0.0, 0.0)
+
+
+@pytest.mark.parametrize("gamma", [0.5, 3.5, True, "2.2"])
+def test_a_bad_camera_gamma_is_refused(gamma):
+    with pytest.raises(ConfigError, match="gamma"):
+        ColourEdge(gamma)
+
+
+def _front(**kw) -> FrontEnd:
+    return FrontEnd(96, 128, IntensityStats(110.0, 30.0), THRESHOLD, "bright", 900.0,
+                    channel="saturation", **kw)
+
+
+def test_the_front_end_keeps_its_edge_gamma_in_the_model_file():
+    front = _front(edge_gamma=2.2)
+    assert front.edge == ColourEdge(2.2)
+    again = FrontEnd.from_info(front.to_info())
+    assert again.edge_gamma == 2.2 and again.edge == ColourEdge(2.2)
+    info = front.to_info()
+    del info["localisation"]["edge_gamma"]  # a model file written before it
+    assert FrontEnd.from_info(info).edge is None
+    with pytest.raises(ConfigError, match="edge_gamma"):
+        _front(edge_gamma=0.7)
+
+
+def test_the_front_end_reads_the_centre_from_colour_only_with_its_gamma():
+    image = square_frame(60.3, 45.7)
+    _, grey, colour = _centres(image)
+    with_colour = _front(edge_gamma=2.2)
+    without = _front()
+    _, loc = with_colour.locate(image)
+    assert (loc.u_px, loc.v_px) == pytest.approx(colour, abs=1e-9)
+    _, loc = without.locate(image)
+    assert (loc.u_px, loc.v_px) == pytest.approx(grey, abs=1e-9)
