@@ -73,7 +73,8 @@ class LoopConfig:
     settle_frames: a full look whose first frame reads a step within ``settle_mm`` and
     ``settle_deg`` (the loop is settling at the taught pose) reads this many frames and takes
     their mean step (1: every look reads one frame, the paper's loop): near the pose the
-    readings' frame-to-frame noise is as large as what is left to correct;
+    readings' frame-to-frame noise is as large as what is left to correct, in a dim frame
+    more so;
     turn_check_deg / turn_check_share: after a full loop that turned by t on a reading of
     r, the next full look should read about r - t (zero, unless the turn was cut to the
     arm's ``max_step_deg``); a reading further off than the larger of ``turn_check_deg`` and
@@ -109,7 +110,7 @@ class LoopConfig:
     converge_deg: float = field(default=0.3, metadata={"min": 0.0})
     max_loops: float = field(default=6.0, metadata={"min": 0.5})
     reach_factor: float = field(default=1.25, metadata={"min": 1.0})
-    settle_frames: int = field(default=1, metadata={"min": 1, "max": 32})
+    settle_frames: int = field(default=3, metadata={"min": 1, "max": 32})
     settle_mm: float = field(default=0.5, metadata={"min": 0.0})
     settle_deg: float = field(default=2.0, metadata={"min": 0.0})
     turn_check_deg: float | None = field(default=10.0, metadata={"min": 0.0})

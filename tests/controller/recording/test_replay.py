@@ -1,5 +1,6 @@
 """Replay: the video decodes with one frame per look, and the overlays fall on the part."""
 
+import dataclasses
 import json
 
 import cv2
@@ -100,7 +101,9 @@ def test_overlays_fall_on_the_part_on_the_simulated_cell(trained, tmp_path):
 
         fp.move_to(fp.state().nominal_pose.moved_in_tool_frame(ToolStep(-12, 8, 0, -20)))
         with RunRecorder(tmp_path / "sim.mcap") as recorder:
-            result = PositioningLoop(devices.arm, ProjectingCamera(), cfg.controller.loop,
+            # one frame a look, so that every grab is a recorded look
+            loop_cfg = dataclasses.replace(cfg.controller.loop, settle_frames=1)
+            result = PositioningLoop(devices.arm, ProjectingCamera(), loop_cfg,
                                      ground_truth=devices.ground_truth, recorder=recorder,
                                      ).run(SYSTEMS["gabor"].estimator(model))
     assert result.ok

@@ -206,8 +206,8 @@ def test_camera_stall_mid_positioning_keeps_every_logged_record(tmp_path, short_
                                                               cube_model_files):
     """The fake camera shows the synthetic cube where the fake arm's pose puts it, and stops
     delivering after a few frames: the records written before are all in the log, whole."""
-    config = service_config(tmp_path, short_dir, controller={"loop": {"converge_mm": 0.0,
-                                                                      "converge_deg": 0.0}})
+    config = service_config(tmp_path, short_dir, controller={"loop": {
+        "converge_mm": 0.0, "converge_deg": 0.0, "settle_frames": 1}})  # a frame a look
     copy_state(cube_model_files, config)
     arm = FakeArm(start=NOMINAL.moved_in_tool_frame(ToolStep(-8.0, 6.0, 0.0, -12.0)))
     scene, frames = SyntheticCell(), []
