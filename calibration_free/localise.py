@@ -186,6 +186,10 @@ _KERNEL_3 = np.ones((3, 3), np.uint8)
 _KERNEL_5 = np.ones((5, 5), np.uint8)
 _KERNEL_7 = np.ones((7, 7), np.uint8)
 
+# The output gamma of an sRGB-like camera, the colour edge's default (``ColourEdge``;
+# ``perception.camera_gamma``).
+DEFAULT_CAMERA_GAMMA = 2.2
+
 # The background's colour must differ from the part's by this much across the part's colour
 # (linear light, 0..1) for ``colour_centre`` to read a pixel's share of it: a part of the
 # table's colour has none, and the grey-level coverage is read instead.

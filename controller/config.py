@@ -19,6 +19,7 @@ from calibration_free.baselines.align.model import AlignConfig
 from calibration_free.baselines.hough.model import HoughConfig
 from calibration_free.baselines.pca.model import PcaConfig
 from calibration_free.gabor import GaborConfig
+from calibration_free.localise import DEFAULT_CAMERA_GAMMA
 from calibration_free.training import NN2_HIDDEN
 from controller.devices import DeviceSection, parse_device_section
 from controller.loop.grasp import GraspConfig
@@ -136,7 +137,7 @@ class PerceptionConfig:
     nn1_uses_nn2_set: bool = True
     axis: bool = True
     edge_coverage: Literal["colour", "grey"] = "colour"
-    camera_gamma: float = field(default=2.2, metadata={"min": 1.0, "max": 3.0})
+    camera_gamma: float = field(default=DEFAULT_CAMERA_GAMMA, metadata={"min": 1.0, "max": 3.0})
 
     def __post_init__(self) -> None:
         if not 1 <= len(self.nn2_hidden) <= 8:  # with <= 4096 units each: fits in memory
