@@ -97,8 +97,9 @@ def object_mask(image: np.ndarray, threshold: np.float32, bright: bool):  # prag
 def coverage_moments(window: np.ndarray, core: np.ndarray, band: np.ndarray,
                      ring: np.ndarray, bright: bool):  # pragma: no cover
     """Moments (weight, sum of u * weight, sum of v * weight; window coordinates) of the
-    part's coverage: 1 in ``core``, in the rest of ``band`` the way from the ring's mean level
-    (the background) to the core's (the part), within 0..1, 0 elsewhere. All zero when core
+    part's coverage: 1 in ``core`` (which lies in ``band``), in the rest of ``band`` the way
+    from the ring's mean level (the background) to the core's (the part), within 0..1, 0
+    elsewhere. All zero when core
     or ring is empty or the part is not beyond the background (brighter for a bright part,
     darker for a dark one)."""
     height, width = window.shape
@@ -121,16 +122,34 @@ def coverage_moments(window: np.ndarray, core: np.ndarray, band: np.ndarray,
     m00 = m10 = m01 = 0.0
     for i in range(height):
         for j in range(width):
-            if core[i, j]:
-                w = 1.0
-            elif band[i, j]:
-                w = min(max((window[i, j] - outside) * scale, 0.0), 1.0)
-            else:
-                continue
-            m00 += w
-            m10 += w * j
-            m01 += w * i
+            if band[i, j]:  # the core lies in the band
+                w = 1.0 if core[i, j] else min(max((window[i, j] - outside) * scale, 0.0),
+                                               1.0)
+                m00 += w
+                m10 += w * j
+                m01 += w * i
     return m00, m10, m01
+
+
+@njit("UniTuple(int64, 2)(float64[:, :, ::1], uint8[:, :], uint8[:, :], int64, int64, int64, "
+      "int64, float64[::1], float64[::1])", cache=True, nogil=True, error_model="numpy")
+def _colour_sums(lin: np.ndarray, core: np.ndarray, ring: np.ndarray, i0: int, i1: int,
+                 j0: int, j1: int, fg: np.ndarray, bg: np.ndarray):  # pragma: no cover
+    """Adds to ``fg`` the colours of the ``core`` pixels and to ``bg`` those of the ``ring``
+    pixels in rows i0..i1 - 1 and columns j0..j1 - 1 of ``lin`` (H x W x 3); returns how many
+    of each."""
+    n_core = n_ring = 0
+    for y in range(i0, i1):
+        for x in range(j0, j1):
+            if core[y, x]:
+                n_core += 1
+                for k in range(3):
+                    fg[k] += lin[y, x, k]
+            elif ring[y, x]:
+                n_ring += 1
+                for k in range(3):
+                    bg[k] += lin[y, x, k]
+    return n_core, n_ring
 
 
 @njit("UniTuple(float64, 3)(uint8[:, :, :], uint8[:, :], uint8[:, :], uint8[:, :], "
@@ -151,19 +170,14 @@ def colour_coverage_moments(rgb: np.ndarray, blob: np.ndarray, core: np.ndarray,
     ``min_contrast`` across the part's direction (a part of the table's colour) nothing is
     read: all zero."""
     height, width = core.shape
-    n_in = n_out = 0
-    fg0 = np.zeros(3)
-    bg0 = np.zeros(3)
+    lin = np.empty((height, width, 3))
     for i in range(height):
         for j in range(width):
-            if core[i, j]:
-                n_in += 1
-                for k in range(3):
-                    fg0[k] += linear[rgb[i, j, k]]
-            elif ring[i, j]:
-                n_out += 1
-                for k in range(3):
-                    bg0[k] += linear[rgb[i, j, k]]
+            for k in range(3):
+                lin[i, j, k] = linear[rgb[i, j, k]]
+    fg0 = np.zeros(3)
+    bg0 = np.zeros(3)
+    n_in, n_out = _colour_sums(lin, core, ring, 0, height, 0, width, fg0, bg0)
     if n_in == 0 or n_out == 0:
         return 0.0, 0.0, 0.0
     fg0 /= n_in
@@ -176,19 +190,10 @@ def colour_coverage_moments(rgb: np.ndarray, blob: np.ndarray, core: np.ndarray,
             if core[i, j]:
                 w = 1.0
             elif band[i, j]:
-                nf = nb = 0
                 fg[:] = 0.0
                 bg[:] = 0.0
-                for y in range(max(i - 2, 0), min(i + 3, height)):
-                    for x in range(max(j - 2, 0), min(j + 3, width)):
-                        if core[y, x]:
-                            nf += 1
-                            for k in range(3):
-                                fg[k] += linear[rgb[y, x, k]]
-                        elif ring[y, x]:
-                            nb += 1
-                            for k in range(3):
-                                bg[k] += linear[rgb[y, x, k]]
+                nf, nb = _colour_sums(lin, core, ring, max(i - 2, 0), min(i + 3, height),
+                                      max(j - 2, 0), min(j + 3, width), fg, bg)
                 if nf:
                     fg /= nf
                 else:
@@ -203,7 +208,7 @@ def colour_coverage_moments(rgb: np.ndarray, blob: np.ndarray, core: np.ndarray,
                 cb = pc = pb = bb = 0.0
                 for k in range(3):
                     c = fg[k] / norm
-                    p = linear[rgb[i, j, k]]
+                    p = lin[i, j, k]
                     cb += c * bg[k]
                     pc += p * c
                     pb += p * bg[k]

@@ -165,11 +165,7 @@ def subpixel_centre(normalised: np.ndarray, polarity: Polarity, u_px: float, v_p
     elsewhere (``Localisation.part_mask``).
     Returns the binary centre unchanged when the window holds no blob or no contrast.
     """
-    height, width = normalised.shape
-    half = int(math.ceil(0.75 * math.sqrt(area_px))) + 3
-    cu, cv_ = int(round(u_px)), int(round(v_px))
-    x0, x1 = max(cu - half, 0), min(cu + half + 1, width)
-    y0, y1 = max(cv_ - half, 0), min(cv_ + half + 1, height)
+    x0, x1, y0, y1 = _blob_window(normalised.shape, u_px, v_px, area_px)
     window = normalised[y0:y1, x0:x1]
     blob = part_mask[y0:y1, x0:x1]
     band = cv2.dilate(blob, _KERNEL_5)
@@ -179,6 +175,17 @@ def subpixel_centre(normalised: np.ndarray, polarity: Polarity, u_px: float, v_p
     if not m00 > 0:
         return u_px, v_px
     return x0 + m10 / m00, y0 + m01 / m00
+
+
+def _blob_window(shape: tuple[int, ...], u_px: float, v_px: float, area_px: float
+                 ) -> tuple[int, int, int, int]:
+    """Columns x0..x1 - 1 and rows y0..y1 - 1 of the frame around a blob of ``area_px``
+    centred near (``u_px``, ``v_px``): the blob, its band and its ring, within the frame."""
+    height, width = shape[:2]
+    half = int(math.ceil(0.75 * math.sqrt(area_px))) + 3
+    cu, cv_ = int(round(u_px)), int(round(v_px))
+    return (max(cu - half, 0), min(cu + half + 1, width), max(cv_ - half, 0),
+            min(cv_ + half + 1, height))
 
 
 _KERNEL_3 = np.ones((3, 3), np.uint8)
@@ -238,11 +245,7 @@ def colour_centre(image: np.ndarray, edge: ColourEdge, u_px: float, v_px: float,
     Returns None where this cannot be read (no background pixels around the blob, or a
     background of the part's own colour): the caller takes ``subpixel_centre``.
     """
-    height, width = part_mask.shape
-    half = int(math.ceil(0.75 * math.sqrt(area_px))) + 3
-    cu, cv_ = int(round(u_px)), int(round(v_px))
-    x0, x1 = max(cu - half, 0), min(cu + half + 1, width)
-    y0, y1 = max(cv_ - half, 0), min(cv_ + half + 1, height)
+    x0, x1, y0, y1 = _blob_window(part_mask.shape, u_px, v_px, area_px)
     blob = part_mask[y0:y1, x0:x1]
     band = cv2.dilate(blob, _KERNEL_3)
     m00, m10, m01 = colour_coverage_moments(
