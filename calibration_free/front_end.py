@@ -117,11 +117,12 @@ class FrontEnd:
 
     def __post_init__(self) -> None:
         gamma = self.edge_gamma
-        if isinstance(gamma, bool) or not isinstance(gamma, (int, float)) or not (
-                gamma == 0.0 or 1.0 <= gamma <= 3.0):
+        try:  # 0: grey levels; any other value is a camera gamma (ColourEdge checks it)
+            edge = None if not isinstance(gamma, bool) and gamma == 0 else ColourEdge(gamma)
+        except ConfigError as exc:
             raise ConfigError(f"front end: edge_gamma must be 0 (grey levels) or a number in "
-                              f"1..3, got {gamma!r}")
-        object.__setattr__(self, "_edge", ColourEdge(float(gamma)) if gamma else None)
+                              f"1..3, got {gamma!r}") from exc
+        object.__setattr__(self, "_edge", edge)
         if self.taught_outline_px is not None:
             object.__setattr__(self, "taught_outline_px",
                                _outline(self.taught_outline_px, "taught_outline_px"))
@@ -263,11 +264,10 @@ class FrontEnd:
         check = None
         if image is not None and self.chroma is not None:
             check = colour_check(image, self.chroma, self.chroma_tolerance)
-        edge = self.edge if image is not None else None
         found = localise(preprocessed, self.threshold, self.expected_area_px,
                          polarity=self.polarity, area_tolerance=self.area_tolerance,
                          max_elongation=self.max_elongation, expected_uv=self.nominal_uv_px,
-                         blob_check=check, image=image, edge=edge)
+                         blob_check=check, image=image, edge=self.edge)
         if found.status != "no_object" or self.taught_outline_px is None \
                 or self.max_elongation == NO_ELONGATION_LIMIT:
             return found
@@ -279,7 +279,7 @@ class FrontEnd:
                        polarity=self.polarity, area_tolerance=self.area_tolerance,
                        max_elongation=CUT_ELONGATION * self.max_elongation,
                        expected_uv=self.nominal_uv_px, blob_check=check, image=image,
-                       edge=edge)
+                       edge=self.edge)
         if cut.ok and cut_share(preprocessed, cut.part_mask, cut.u_px, cut.v_px,
                                 self.threshold) >= MIN_CUT_SHARE:
             return cut
