@@ -227,6 +227,18 @@ class FrontEnd:
         return self._cut(roi, loc, math.floor(loc.u_px - (size_px - 1) / 2.0 + 0.5),
                          math.floor(loc.v_px - (size_px - 1) / 2.0 + 0.5))
 
+    def coverage_roi(self, loc: Localisation, size_px: int) -> np.ndarray | None:
+        """The part's coverage, the ``size_px`` square centred on it: each pixel's share of
+        the part read from the frame's colour (``Localisation.coverage``; 1 inside the
+        outline, 0 beyond, within 0..1), as float32; None where the centre was not read
+        from colour (no ``edge_gamma``, a grey part, a part partly hidden and drawn in)."""
+        if loc.coverage is None:
+            return None
+        x0, y0, weights = loc.coverage
+        window = np.clip(weights, np.float32(0.0), np.float32(1.0))
+        # the window's border lies beyond the band (0), which the replicated border repeats
+        return extract_roi(window, loc.u_px - x0, loc.v_px - y0, size_px)
+
     def feature_frame(self, preprocessed: np.ndarray, loc: Localisation) -> np.ndarray:
         """The whole preprocessed frame cut as ``feature_roi`` cuts its window (a copy): what a
         full-frame filter must see to give the same features (``bench perception``'s

@@ -153,10 +153,11 @@ def _colour_sums(lin: np.ndarray, core: np.ndarray, ring: np.ndarray, i0: int, i
 
 
 @njit("UniTuple(float64, 3)(uint8[:, :, :], uint8[:, :], uint8[:, :], uint8[:, :], "
-      "uint8[:, :], float64[::1], float64)", cache=True, nogil=True, error_model="numpy")
+      "uint8[:, :], float64[::1], float64, float32[:, ::1])", cache=True, nogil=True,
+      error_model="numpy")
 def colour_coverage_moments(rgb: np.ndarray, blob: np.ndarray, core: np.ndarray,
                             band: np.ndarray, ring: np.ndarray, linear: np.ndarray,
-                            min_contrast: float):  # pragma: no cover
+                            min_contrast: float, weights: np.ndarray):  # pragma: no cover
     """Moments (weight, sum of u * weight, sum of v * weight; window coordinates) of the
     part's coverage read from each pixel's colour (``localise.colour_centre``): 1 in ``core``;
     in the rest of ``band``, with the pixel's linear colour p = alpha * c + beta * b (c the
@@ -168,7 +169,8 @@ def colour_coverage_moments(rgb: np.ndarray, blob: np.ndarray, core: np.ndarray,
     part's edge would then only add to it, most where the background is dark, and move the
     centre that way), only kept within -1..2. Where the background's colour has less than
     ``min_contrast`` across the part's direction (a part of the table's colour) nothing is
-    read: all zero."""
+    read: all zero. ``weights`` (the window's size) receives each pixel's weight (0 off the
+    band; undefined where all zero is returned)."""
     height, width = core.shape
     lin = np.empty((height, width, 3))
     for i in range(height):
@@ -226,7 +228,9 @@ def colour_coverage_moments(rgb: np.ndarray, blob: np.ndarray, core: np.ndarray,
                 # that one such pixel cannot move the centre; within, the noise stays unbiased
                 w = min(max(w, -1.0), 2.0)
             else:
+                weights[i, j] = 0.0
                 continue
+            weights[i, j] = w
             m00 += w
             m10 += w * j
             m01 += w * i

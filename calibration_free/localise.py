@@ -68,6 +68,10 @@ class Localisation:
         method: which path decided: "histogram" or "components".
         part_mask: a uint8 image of the frame's size, 255 on the part's blob and 0 elsewhere
             (what the features may look at: ``FrontEnd.feature_roi``); None unless ok.
+        coverage: where the centre was read from the frame's colour (``colour_centre``),
+            the part's share of each pixel around it: (x0, y0, weights), the float32 weights
+            of the frame's pixels from column x0 and row y0 on (1 inside the outline, the
+            share along it, 0 beyond); None otherwise.
     """
 
     status: Status
@@ -77,6 +81,8 @@ class Localisation:
     reason: str
     method: Method
     part_mask: np.ndarray | None = field(default=None, repr=False, compare=False)
+    coverage: tuple[int, int, np.ndarray] | None = field(default=None, repr=False,
+                                                          compare=False)
 
     @property
     def ok(self) -> bool:
@@ -150,7 +156,8 @@ def _check_polarity(polarity: Polarity) -> bool:
 
 
 def subpixel_centre(normalised: np.ndarray, polarity: Polarity, u_px: float, v_px: float,
-                    area_px: float, part_mask: np.ndarray) -> tuple[float, float]:
+                    area_px: float, part_mask: np.ndarray,
+                    box: tuple[int, int, int, int] | None = None) -> tuple[float, float]:
     """The blob's centre with its outline weighted by how much of each edge pixel it covers.
 
     The binary mask's centroid moves only when an edge crosses a pixel's centre, in whole
@@ -163,9 +170,11 @@ def subpixel_centre(normalised: np.ndarray, polarity: Polarity, u_px: float, v_p
 
     ``part_mask`` is the full-frame uint8 image that is 255 on the part's blob and 0
     elsewhere (``Localisation.part_mask``).
+    ``box``: the blob's bounding box (x, y, w, h), for a blob longer than the square around
+    its centre (``_blob_window``).
     Returns the binary centre unchanged when the window holds no blob or no contrast.
     """
-    x0, x1, y0, y1 = _blob_window(normalised.shape, u_px, v_px, area_px)
+    x0, x1, y0, y1 = _blob_window(normalised.shape, u_px, v_px, area_px, box)
     window = normalised[y0:y1, x0:x1]
     blob = part_mask[y0:y1, x0:x1]
     band = cv2.dilate(blob, _KERNEL_5)
@@ -177,18 +186,27 @@ def subpixel_centre(normalised: np.ndarray, polarity: Polarity, u_px: float, v_p
     return x0 + m10 / m00, y0 + m01 / m00
 
 
-def _blob_window(shape: tuple[int, ...], u_px: float, v_px: float, area_px: float
-                 ) -> tuple[int, int, int, int]:
+def _blob_window(shape: tuple[int, ...], u_px: float, v_px: float, area_px: float,
+                 box: tuple[int, int, int, int] | None = None) -> tuple[int, int, int, int]:
     """Columns x0..x1 - 1 and rows y0..y1 - 1 of the frame around a blob of ``area_px``
-    centred near (``u_px``, ``v_px``): the blob, its band and its ring, within the frame."""
+    centred near (``u_px``, ``v_px``): the blob, its band and its ring, within the frame.
+    The square around the centre holds a compact blob at any turn; an elongated one (a
+    screw, a ledge) reaches beyond it, so the window also spans the blob's bounding
+    ``box`` (x, y, w, h) and the ring around it."""
     height, width = shape[:2]
     half = int(math.ceil(0.75 * math.sqrt(area_px))) + 3
     cu, cv_ = int(round(u_px)), int(round(v_px))
-    return (max(cu - half, 0), min(cu + half + 1, width), max(cv_ - half, 0),
-            min(cv_ + half + 1, height))
+    x0, x1, y0, y1 = cu - half, cu + half + 1, cv_ - half, cv_ + half + 1
+    if box is not None:
+        bx, by, bw, bh = box
+        x0, x1 = min(x0, bx - _RING_PX), max(x1, bx + bw + _RING_PX)
+        y0, y1 = min(y0, by - _RING_PX), max(y1, by + bh + _RING_PX)
+    return max(x0, 0), min(x1, width), max(y0, 0), min(y1, height)
 
 
 _KERNEL_3 = np.ones((3, 3), np.uint8)
+# The widest ring either centre reads beyond the blob (``subpixel_centre``'s: three pixels).
+_RING_PX = 3
 # One dilation with these is two and three with the 3x3 square.
 _KERNEL_5 = np.ones((5, 5), np.uint8)
 _KERNEL_7 = np.ones((7, 7), np.uint8)
@@ -224,8 +242,11 @@ class ColourEdge:
 
 
 def colour_centre(image: np.ndarray, edge: ColourEdge, u_px: float, v_px: float,
-                  area_px: float, part_mask: np.ndarray) -> tuple[float, float] | None:
-    """The blob's centre with each edge pixel weighted by the part's share of its colour.
+                  area_px: float, part_mask: np.ndarray,
+                  box: tuple[int, int, int, int] | None = None
+                  ) -> tuple[float, float, tuple[int, int, np.ndarray]] | None:
+    """The blob's centre with each edge pixel weighted by the part's share of its colour,
+    and those weights (``Localisation.coverage``).
 
     A pixel on the part's outline holds part and table mixed by how much of it each covers,
     in linear light. The grey-level coverage of ``subpixel_centre`` reads that mix against
@@ -242,30 +263,36 @@ def colour_centre(image: np.ndarray, edge: ColourEdge, u_px: float, v_px: float,
     blob's outline to one outside it (the blob's threshold cuts the edge's ramp near its
     middle).
 
+    ``box``: the blob's bounding box (x, y, w, h), as for ``subpixel_centre``.
+
     Returns None where this cannot be read (no background pixels around the blob, or a
     background of the part's own colour): the caller takes ``subpixel_centre``.
     """
-    x0, x1, y0, y1 = _blob_window(part_mask.shape, u_px, v_px, area_px)
+    x0, x1, y0, y1 = _blob_window(part_mask.shape, u_px, v_px, area_px, box)
     blob = part_mask[y0:y1, x0:x1]
     band = cv2.dilate(blob, _KERNEL_3)
+    weights = np.empty(blob.shape, np.float32)
     m00, m10, m01 = colour_coverage_moments(
         image[y0:y1, x0:x1], blob, cv2.erode(blob, _KERNEL_3), band,
-        cv2.subtract(cv2.dilate(blob, _KERNEL_5), band), edge.linear, MIN_COLOUR_CONTRAST)
+        cv2.subtract(cv2.dilate(blob, _KERNEL_5), band), edge.linear, MIN_COLOUR_CONTRAST,
+        weights)
     if not m00 > 0:
         return None
-    return x0 + m10 / m00, y0 + m01 / m00
+    return x0 + m10 / m00, y0 + m01 / m00, (x0, y0, weights)
 
 
 def _centre(normalised: np.ndarray, polarity: Polarity, u_px: float, v_px: float,
             area_px: float, part_mask: np.ndarray, image: np.ndarray | None,
-            edge: ColourEdge | None) -> tuple[float, float]:
+            edge: ColourEdge | None, box: tuple[int, int, int, int]
+            ) -> tuple[float, float, tuple[int, int, np.ndarray] | None]:
     """``colour_centre`` where the frame and its ``edge`` are given and it reads, else
-    ``subpixel_centre``."""
+    ``subpixel_centre`` (and no coverage); ``box``: the blob's bounding box (x, y, w, h)."""
     if image is not None and edge is not None:
-        found = colour_centre(image, edge, u_px, v_px, area_px, part_mask)
+        found = colour_centre(image, edge, u_px, v_px, area_px, part_mask, box)
         if found is not None:
             return found
-    return subpixel_centre(normalised, polarity, u_px, v_px, area_px, part_mask)
+    return (*subpixel_centre(normalised, polarity, u_px, v_px, area_px, part_mask, box),
+            None)
 
 
 def localise(normalised: np.ndarray, threshold: float, expected_area_px: float | None = None,
@@ -319,23 +346,24 @@ def localise(normalised: np.ndarray, threshold: float, expected_area_px: float |
     if matches:
         # One blob: the mask's columns and rows each hold a single run, the box is compact
         # for the area, and the shape is the part's.
-        _, width, _, height = box.tolist()
+        x, width, y, height = box.tolist()
         _, s_u, s_v, s_uu, s_vv, s_uv = moments.tolist()
         u, v = s_u / area, s_v / area
         if width and height and width * height <= MAX_BOX_TO_AREA * area and (
                 max_elongation == NO_ELONGATION_LIMIT
                 or _elongation(s_uu / area - u * u, s_vv / area - v * v,
                                s_uv / area - u * v) <= max_elongation):
-            u, v = _centre(normalised, polarity, u, v, area, mask, image, edge)
-            return Localisation("ok", u, v, area, "", "histogram", mask)
+            u, v, coverage = _centre(normalised, polarity, u, v, area, mask, image, edge,
+                                     (x, y, width, height))
+            return Localisation("ok", u, v, area, "", "histogram", mask, coverage)
     loc, labels, label = _by_components(mask, expected_area_px, area_tolerance, min_blob_px,
                                         max_elongation, expected_uv, blob_check)
     if loc.status != "ok":
         return loc
     part_mask = cv2.compare(labels, label, cv2.CMP_EQ)
-    u, v = _centre(normalised, polarity, loc.u_px, loc.v_px, loc.area_px, part_mask, image,
-                   edge)
-    return dataclasses.replace(loc, u_px=u, v_px=v, part_mask=part_mask)
+    u, v, coverage = _centre(normalised, polarity, loc.u_px, loc.v_px, loc.area_px, part_mask,
+                             image, edge, cv2.boundingRect(part_mask))
+    return dataclasses.replace(loc, u_px=u, v_px=v, part_mask=part_mask, coverage=coverage)
 
 
 def elongation(mask: np.ndarray) -> float:

@@ -196,7 +196,8 @@ class Perception:
             # the features see the part with its hidden part drawn in, centred on it
             frame, mask = completed(frame, loc.part_mask, fit,
                                     self._front.feature_ceiling * self._front.threshold)
-            seen = dataclasses.replace(loc, u_px=fit.u_px, v_px=fit.v_px, part_mask=mask)
+            seen = dataclasses.replace(loc, u_px=fit.u_px, v_px=fit.v_px, part_mask=mask,
+                                       coverage=None)
         roi = self._front.feature_roi(frame, seen, self._roi_px)
         t4 = clock()
         features = self._bank.features(roi)
@@ -207,7 +208,13 @@ class Perception:
         sc = (float(s) / norm, float(c) / norm)
         axis_deg = None
         if self.bundle.axis is not None:
-            axis_deg = self.bundle.axis.reading(roi, *percept.centre_px, nn2_deg)
+            silhouette = roi
+            if self.bundle.axis.silhouette == "coverage":
+                # where the coverage is not read (a part partly hidden, drawn in) the
+                # features' silhouette stands in: the same outline, less exactly placed
+                coverage = self._front.coverage_roi(seen, self._roi_px)
+                silhouette = roi if coverage is None else coverage
+            axis_deg = self.bundle.axis.reading(silhouette, *percept.centre_px, nn2_deg)
             if axis_deg is not None:
                 dphi = axis_deg
                 sc = tuple(float(v) for v in angles.encode(dphi, self.bundle.kappa))

@@ -485,8 +485,14 @@ def train_bundle(nn1_data: Dataset, nn2_data: Dataset, *, object_kind: str, kapp
                     hidden=nn2_hidden, epochs=nn2_epochs, weight_decay=nn2_weight_decay)
     # An elongated part's long axis reads the turn near the taught pose (calibration_free.axis)
     at_taught = at_taught_pose(nn2_labels)
-    axis = (fit_axis(rois, prep.centres("nn2"), nn2_labels[:, 2], at_taught, kappa)
-            if fine_axis else None)
+    axis = None
+    if fine_axis:
+        # the axis reads the part's coverage where every image's centre was read from colour
+        found = [prep.found["nn2"][i] for i in prep.usable["nn2"]]
+        coverage = [prep.front.coverage_roi(loc, gabor.roi_px) for loc in found]
+        axis = (fit_axis(coverage, prep.centres("nn2"), nn2_labels[:, 2], at_taught, kappa,
+                         "coverage") if all(c is not None for c in coverage) else
+                fit_axis(rois, prep.centres("nn2"), nn2_labels[:, 2], at_taught, kappa))
     if axis is not None and kappa == 2:  # a bar with a hidden end (calibration_free.ends)
         usable = prep.usable["nn2"]
         ends = fit_ends([prep.normalised["nn2"][i] for i in usable],

@@ -117,7 +117,9 @@ class PerceptionConfig:
     nn1_uses_nn2_set: also train NN1 on the NN2 grid's images (they cost no extra motion and
     make NN1 precise near the nominal pose, where the loop's fixed point is);
     axis: for an elongated part (screw, ledge) the turn near the taught pose is read from the
-    silhouette's long axis (``calibration_free.axis``; false: NN2 alone);
+    silhouette's long axis (``calibration_free.axis``; with ``edge_coverage: colour`` the
+    silhouette of the part's share of each pixel, ``FrontEnd.coverage_roi``; false: NN2
+    alone);
     edge_coverage: how the part's centre reads the pixels along its outline: ``colour``, by
     the table's share of each pixel's colour (unchanged by how a lamp lights the part's
     edges, ``calibration_free.localise.colour_centre``), or ``grey``, by the localisation

@@ -164,6 +164,18 @@ def test_the_map_round_trips_and_bad_files_are_refused():
                        ({k: v for k, v in info.items() if k != "near"}, "needs the keys"),
                        ({**info, "near": "x"}, "finite"),
                        ({**info, "whole_reads": "yes"}, "whole_reads must be true or false"),
+                       ({**info, "silhouette": "saturation"},
+                        "silhouette must be coverage or features"),
                        ([1, 2], "needs the keys")):
         with pytest.raises(BundleError, match=match):
             AxisMap.from_info(bad)
+
+
+def test_the_silhouette_a_map_reads_is_kept_and_older_files_read_the_features():
+    rois, uv, dphi, taught = grid(1)
+    axis = fit_axis(rois, uv, dphi, taught, 1, "coverage")
+    assert axis.silhouette == "coverage"
+    assert AxisMap.from_info(axis.to_info()).silhouette == "coverage"
+    older = {k: v for k, v in axis.to_info().items() if k != "silhouette"}
+    assert AxisMap.from_info(older).silhouette == "features"
+    assert fit_axis(rois, uv, dphi, taught, 1).silhouette == "features"

@@ -268,6 +268,19 @@ def test_a_bars_end_map_round_trips_and_a_version_6_file_has_none(bundle, tmp_pa
     assert old.format_version == 6 and old.axis is not None and old.axis.ends is None
 
 
+def test_a_version_7_files_axis_map_reads_the_features_silhouette(bundle, tmp_path):
+    screw = dataclasses.replace(bundle, object_kind="screw", kappa=1,
+                                axis=dataclasses.replace(an_axis_map(), silhouette="coverage"))
+    path = tmp_path / "screw.bundle"
+    screw.save(path)
+    assert ModelBundle.load(path).axis.silhouette == "coverage"
+    info, tensors = info_and_tensors(screw)
+    del info["axis"]["silhouette"]
+    path.write_bytes(pack(info, tensors, version=7))
+    old = ModelBundle.load(path, expect_object="screw")
+    assert old.format_version == 7 and old.axis.silhouette == "features"
+
+
 def test_the_taught_area_is_learned_and_checked(bundle, cell, tmp_path):
     """The part's blob area at the taught pose (the hidden-part check's reference): the
     taught-pose frames' mean, which a frame there reads back."""

@@ -77,7 +77,15 @@ def test_with_localise_and_the_frame_the_colour_centre_is_taken():
     saturation = saturation_image(np.ascontiguousarray(image))
     _, _, colour = _centres(image)
     loc = localise(saturation, THRESHOLD, image=image, edge=ColourEdge(2.2))
-    assert (loc.u_px, loc.v_px) == pytest.approx(colour, abs=1e-9)
+    assert (loc.u_px, loc.v_px) == pytest.approx(colour[:2], abs=1e-9)
+    # the part's share of each pixel is kept with the centre: its centroid is the centre
+    x0, y0, weights = loc.coverage
+    assert weights.dtype == np.float32 and (x0, y0) == colour[2][:2]
+    np.testing.assert_array_equal(weights, colour[2][2])
+    rows, cols = np.mgrid[0:weights.shape[0], 0:weights.shape[1]]
+    centroid = ((weights * cols).sum() / weights.sum() + x0,
+                (weights * rows).sum() / weights.sum() + y0)
+    assert centroid == pytest.approx((loc.u_px, loc.v_px), abs=1e-4)
 
 
 def test_a_part_of_the_tables_colour_falls_back_to_grey_levels():
@@ -93,11 +101,12 @@ def test_a_part_of_the_tables_colour_falls_back_to_grey_levels():
 
 
 def _reference_colour_moments(rgb, blob, core, band, ring, linear, min_contrast):
-    """The kernel's formula in numpy, one pixel at a time."""
+    """The kernel's formula in numpy, one pixel at a time: its moments and weights."""
     lin = linear[rgb]
     fg0, bg0 = lin[core > 0].mean(axis=0), lin[ring > 0].mean(axis=0)
     height, width = core.shape
     m = np.zeros(3)
+    weights = np.zeros(core.shape)
     for i in range(height):
         for j in range(width):
             if core[i, j]:
@@ -111,7 +120,7 @@ def _reference_colour_moments(rgb, blob, core, band, ring, linear, min_contrast)
                 c = fg / np.linalg.norm(fg)
                 across = bg @ bg - (c @ bg) ** 2
                 if across < min_contrast ** 2:
-                    return 0.0, 0.0, 0.0
+                    return (0.0, 0.0, 0.0), weights
                 p = lin[i, j]
                 beta = (p @ bg - (c @ bg) * (p @ c)) / across
                 w = 1.0 - beta
@@ -120,8 +129,9 @@ def _reference_colour_moments(rgb, blob, core, band, ring, linear, min_contrast)
                 w = float(np.clip(w, -1.0, 2.0))
             else:
                 continue
+            weights[i, j] = w
             m += (w, w * j, w * i)
-    return tuple(m)
+    return tuple(m), weights
 
 
 def test_colour_coverage_moments_match_the_numpy_formula():
@@ -133,14 +143,16 @@ def test_colour_coverage_moments_match_the_numpy_formula():
     band = cv2.dilate(blob, np.ones((3, 3), np.uint8))
     ring = cv2.subtract(cv2.dilate(blob, np.ones((5, 5), np.uint8)), band)
     linear = ColourEdge(2.2).linear
+    weights = np.full(blob.shape, np.nan, np.float32)
     got = colour_coverage_moments(image[window], blob, core, band, ring, linear,
-                                  MIN_COLOUR_CONTRAST)
-    want = _reference_colour_moments(image[window], blob, core, band, ring, linear,
-                                      MIN_COLOUR_CONTRAST)
+                                  MIN_COLOUR_CONTRAST, weights)
+    want, want_weights = _reference_colour_moments(image[window], blob, core, band, ring,
+                                                   linear, MIN_COLOUR_CONTRAST)
     np.testing.assert_allclose(got, want, rtol=1e-9)
+    np.testing.assert_allclose(weights, want_weights, rtol=1e-6, atol=1e-6)
     empty = np.zeros_like(core)
     assert colour_coverage_moments(image[window], blob, empty, band, ring, linear,
-                                   MIN_COLOUR_CONTRAST) == (0.0, 0.0, 0.0)
+                                   MIN_COLOUR_CONTRAST, weights) == (0.0, 0.0, 0.0)
 
 
 @pytest.mark.parametrize("gamma", [0.5, 3.5, True, "2.2"])
@@ -149,8 +161,8 @@ def test_a_bad_camera_gamma_is_refused(gamma):
         ColourEdge(gamma)
 
 
-def _front(**kw) -> FrontEnd:
-    return FrontEnd(96, 128, IntensityStats(110.0, 30.0), THRESHOLD, "bright", 900.0,
+def _front(area_px: float = 900.0, **kw) -> FrontEnd:
+    return FrontEnd(96, 128, IntensityStats(110.0, 30.0), THRESHOLD, "bright", area_px,
                     channel="saturation", **kw)
 
 
@@ -172,6 +184,46 @@ def test_the_front_end_reads_the_centre_from_colour_only_with_its_gamma():
     with_colour = _front(edge_gamma=2.2)
     without = _front()
     _, loc = with_colour.locate(image)
-    assert (loc.u_px, loc.v_px) == pytest.approx(colour, abs=1e-9)
+    assert (loc.u_px, loc.v_px) == pytest.approx(colour[:2], abs=1e-9)
     _, loc = without.locate(image)
     assert (loc.u_px, loc.v_px) == pytest.approx(grey, abs=1e-9)
+
+
+def bar_frame(u0: float, v0: float, angle_deg: float, *, lit: float = 1.6,
+              dark: float = 0.15) -> np.ndarray:
+    """A 128x96 frame of a 44x12 px bar centred on (u0, v0), its long axis at ``angle_deg``
+    from the u axis, shaded by a low lamp from the left as ``square_frame``'s part."""
+    height, width = 96, 128
+    rows, cols = np.mgrid[0:height * SAMPLES, 0:width * SAMPLES]
+    x, y = (cols + 0.5) / SAMPLES - 0.5, (rows + 0.5) / SAMPLES - 0.5
+    a = np.radians(angle_deg)
+    along = (x - u0) * np.cos(a) + (y - v0) * np.sin(a)
+    across = -(x - u0) * np.sin(a) + (y - v0) * np.cos(a)
+    inside = (np.abs(along) <= 22.0) & (np.abs(across) <= 6.0)
+    t = np.clip((x - (u0 - 22.0)) / 44.0, 0.0, 1.0)
+    shade = dark + (lit - dark) * (1 - t) ** 3
+    linear = np.stack([np.where(inside, c * shade, 0.2) for c in YELLOW], axis=-1)
+    frame = cv2.resize(linear, (width, height), interpolation=cv2.INTER_AREA)
+    return np.clip(np.clip(frame, 0.0, 1.0) ** (1.0 / 2.2) * 255.0 + 0.5, 0, 255
+                   ).astype(np.uint8)
+
+
+@pytest.mark.parametrize("angle", [20.0, 65.0, 110.0])
+def test_the_coverage_roi_is_the_parts_share_of_each_pixel_centred_on_it(angle):
+    from calibration_free.axis import axis_of
+
+    image = bar_frame(61.3, 47.6, angle)
+    front = _front(edge_gamma=2.2, area_px=44.0 * 12.0)
+    _, loc = front.locate(image)
+    roi = front.coverage_roi(loc, 50)
+    assert roi.shape == (50, 50) and roi.dtype == np.float32
+    assert roi.min() >= 0.0 and roi.max() <= 1.0
+    assert roi[24:26, 24:26].min() == 1.0
+    assert max(roi[:4, :4].max(), roi[:4, -4:].max(), roi[-4:, :4].max(), roi[-4:, -4:].max()) == 0.0
+    # its second moments give the bar's axis, whichever side the lamp lights
+    direction, elongation = axis_of(roi)
+    assert abs((direction - angle + 90.0) % 180.0 - 90.0) < 0.3
+    assert elongation > 3.0
+    # without the colour edge (or for a part drawn in where it is hidden) there is none
+    _, grey_loc = _front(area_px=44.0 * 12.0).locate(image)
+    assert grey_loc.coverage is None and front.coverage_roi(grey_loc, 50) is None

@@ -35,6 +35,8 @@ def test_screw_rotation_is_read_over_the_full_circle(tmp_path):
                        limits=cfg.safety, progress=False)
     perception = Perception(model.model)
     assert model.model.axis is not None and model.model.axis.kappa == 1
+    # the axis is read from the part's share of each pixel (the default colour edge)
+    assert model.model.axis.silhouette == "coverage"
     err, err_nn2 = [], []
     for image, label in zip(test.images, test.labels, strict=True):
         p = perception.perceive(image)
