@@ -6,6 +6,7 @@ import cv2
 import numpy as np
 import pytest
 
+from calibration_free.axis import axis_of
 from calibration_free.front_end import FrontEnd
 from calibration_free.kernels import colour_coverage_moments, saturation_image
 from calibration_free.localise import (
@@ -210,8 +211,6 @@ def bar_frame(u0: float, v0: float, angle_deg: float, *, lit: float = 1.6,
 
 @pytest.mark.parametrize("angle", [20.0, 65.0, 110.0])
 def test_the_coverage_roi_is_the_parts_share_of_each_pixel_centred_on_it(angle):
-    from calibration_free.axis import axis_of
-
     image = bar_frame(61.3, 47.6, angle)
     front = _front(edge_gamma=2.2, area_px=44.0 * 12.0)
     _, loc = front.locate(image)
@@ -219,7 +218,8 @@ def test_the_coverage_roi_is_the_parts_share_of_each_pixel_centred_on_it(angle):
     assert roi.shape == (50, 50) and roi.dtype == np.float32
     assert roi.min() >= 0.0 and roi.max() <= 1.0
     assert roi[24:26, 24:26].min() == 1.0
-    assert max(roi[:4, :4].max(), roi[:4, -4:].max(), roi[-4:, :4].max(), roi[-4:, -4:].max()) == 0.0
+    corners = (roi[:4, :4], roi[:4, -4:], roi[-4:, :4], roi[-4:, -4:])
+    assert max(c.max() for c in corners) == 0.0
     # its second moments give the bar's axis, whichever side the lamp lights
     direction, elongation = axis_of(roi)
     assert abs((direction - angle + 90.0) % 180.0 - 90.0) < 0.3
