@@ -194,7 +194,7 @@ def _blob_window(shape: tuple[int, ...], u_px: float, v_px: float, area_px: floa
     screw, a ledge) reaches beyond it, so the window also spans the blob's bounding
     ``box`` (x, y, w, h) and the ring around it."""
     height, width = shape[:2]
-    half = int(math.ceil(0.75 * math.sqrt(area_px))) + 3
+    half = int(math.ceil(0.75 * math.sqrt(area_px))) + _RING_PX
     cu, cv_ = int(round(u_px)), int(round(v_px))
     x0, x1, y0, y1 = cu - half, cu + half + 1, cv_ - half, cv_ + half + 1
     if box is not None:
@@ -356,13 +356,14 @@ def localise(normalised: np.ndarray, threshold: float, expected_area_px: float |
             u, v, coverage = _centre(normalised, polarity, u, v, area, mask, image, edge,
                                      (x, y, width, height))
             return Localisation("ok", u, v, area, "", "histogram", mask, coverage)
-    loc, labels, label = _by_components(mask, expected_area_px, area_tolerance, min_blob_px,
-                                        max_elongation, expected_uv, blob_check)
+    loc, labels, stats, label = _by_components(mask, expected_area_px, area_tolerance,
+                                               min_blob_px, max_elongation, expected_uv,
+                                               blob_check)
     if loc.status != "ok":
         return loc
     part_mask = cv2.compare(labels, label, cv2.CMP_EQ)
     u, v, coverage = _centre(normalised, polarity, loc.u_px, loc.v_px, loc.area_px, part_mask,
-                             image, edge, cv2.boundingRect(part_mask))
+                             image, edge, tuple(int(v) for v in stats[label, :4]))
     return dataclasses.replace(loc, u_px=u, v_px=v, part_mask=part_mask, coverage=coverage)
 
 
@@ -390,16 +391,18 @@ def _by_components(mask: np.ndarray, expected_area_px: float | None, area_tolera
                    min_blob_px: int, max_elongation: float,
                    expected_uv: tuple[float, float] | None,
                    blob_check: BlobCheck | None = None) \
-        -> tuple[Localisation, np.ndarray, int]:
+        -> tuple[Localisation, np.ndarray, np.ndarray, int]:
     """The blob of the part among the mask's connected components (``localise``'s second
-    path), with the label image and the part's label (its binary centre, unrefined)."""
+    path), with the label image, the components' statistics (``stats[label, :4]``: a blob's
+    box x, y, w, h) and the part's label (its binary centre, unrefined)."""
     n, labels, stats, centroids = cv2.connectedComponentsWithStatsWithAlgorithm(
         mask, 8, cv2.CV_32S, cv2.CCL_BBDT)
     areas = stats[1:n, cv2.CC_STAT_AREA].astype(np.float64)
     blobs = np.flatnonzero(areas >= min_blob_px)
     if blobs.size == 0:
         return (Localisation("no_object", None, None, None,
-                             f"no blob of {min_blob_px} px or more", "components"), labels, 0)
+                             f"no blob of {min_blob_px} px or more", "components"), labels,
+                stats, 0)
     if expected_area_px is None:
         order = blobs[np.argsort(areas[blobs])[::-1]]
         best = int(order[0])
@@ -407,7 +410,7 @@ def _by_components(mask: np.ndarray, expected_area_px: float | None, area_tolera
             return (Localisation(
                 "ambiguous", None, None, None,
                 f"the two largest blobs have similar areas ({areas[best]:.0f} and "
-                f"{areas[order[1]]:.0f} px)", "components"), labels, 0)
+                f"{areas[order[1]]:.0f} px)", "components"), labels, stats, 0)
         picked = best
     else:
         close = blobs[np.abs(areas[blobs] / expected_area_px - 1.0) <= area_tolerance]
@@ -418,14 +421,14 @@ def _by_components(mask: np.ndarray, expected_area_px: float | None, area_tolera
                 return (Localisation(
                     "no_object", None, None, None,
                     f"{close.size} blob(s) of the expected area, none of the trained shape "
-                    f"(elongation above {max_elongation:.2f})", "components"), labels, 0)
+                    f"(elongation above {max_elongation:.2f})", "components"), labels, stats, 0)
             close = np.array(shaped, dtype=close.dtype)
         if close.size == 0:
             return (Localisation(
                 "no_object", None, None, None,
                 f"no blob within {area_tolerance:.0%} of the expected {expected_area_px:.0f} px"
                 f" (largest: {areas[blobs].max():.0f} px of {blobs.size} blobs)", "components"),
-                labels, 0)
+                labels, stats, 0)
         if blob_check is not None and close.size > 1:
             # Several candidates: those the check accepts (the part's colour) go first; with
             # none accepted, all stay and the nearest rule below decides.
@@ -440,14 +443,14 @@ def _by_components(mask: np.ndarray, expected_area_px: float | None, area_tolera
                     "ambiguous", None, None, None,
                     f"{close.size} blobs match the expected {expected_area_px:.0f} px "
                     f"({found} px) and none is clearly nearest the taught position",
-                    "components"), labels, 0)
+                    "components"), labels, stats, 0)
             close = close[nearest:nearest + 1]
         picked = int(close[0])
     u, v = centroids[picked + 1]
     others = blobs.size - 1
     return (Localisation("ok", float(u), float(v), float(areas[picked]),
                          f"picked among {others + 1} blobs" if others else "", "components"),
-            labels, picked + 1)
+            labels, stats, picked + 1)
 
 
 def _blob_passes(labels: np.ndarray, stats: np.ndarray, label: int, check: BlobCheck) -> bool:
