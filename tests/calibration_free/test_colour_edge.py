@@ -20,6 +20,7 @@ from calibration_free.preprocess import IntensityStats
 from drivers.core.errors import ConfigError
 
 SAMPLES = 16  # renderer samples per pixel side
+HEIGHT, WIDTH = 96, 128  # the frames' size
 YELLOW = (0.9, 0.7, 0.05)  # the part's colour, linear light
 THRESHOLD = 110.0  # saturation level the blob is cut at
 
@@ -31,14 +32,25 @@ def square_frame(u0: float, v0: float, *, lit: float = 1.6, dark: float = 0.15,
     low lamp from the left shades a part with rounded edges: its left edge lit ``lit`` times
     its colour, its right edge ``dark`` times, the change steepest at the edges. Each pixel
     integrates the light over its area (linear light), then the camera's gamma and noise."""
-    height, width, half = 96, 128, 15.0
-    rows, cols = np.mgrid[0:height * SAMPLES, 0:width * SAMPLES]
-    x, y = (cols + 0.5) / SAMPLES - 0.5, (rows + 0.5) / SAMPLES - 0.5
+    half = 15.0
+    x, y = _samples()
     inside = (np.abs(x - u0) <= half) & (np.abs(y - v0) <= half)
     t = np.clip((x - (u0 - half)) / (2 * half), 0.0, 1.0)
     shade = dark + (lit - dark) * (1 - t) ** 3 + 0.3 * (1 - np.abs(2 * t - 1))
-    linear = np.stack([np.where(inside, c * shade, table) for c in part], axis=-1)
-    frame = cv2.resize(linear, (width, height), interpolation=cv2.INTER_AREA)
+    return _camera(np.stack([np.where(inside, c * shade, table) for c in part], axis=-1),
+                   gamma, noise)
+
+
+def _samples() -> tuple[np.ndarray, np.ndarray]:
+    """The frame coordinates (x, y) of the renderer's samples, SAMPLES per pixel side."""
+    rows, cols = np.mgrid[0:HEIGHT * SAMPLES, 0:WIDTH * SAMPLES]
+    return (cols + 0.5) / SAMPLES - 0.5, (rows + 0.5) / SAMPLES - 0.5
+
+
+def _camera(linear: np.ndarray, gamma: float = 2.2, noise: float = 0.0) -> np.ndarray:
+    """The frame a camera delivers of the samples' linear light: each pixel their mean, then
+    the output gamma and noise, as uint8."""
+    frame = cv2.resize(linear, (WIDTH, HEIGHT), interpolation=cv2.INTER_AREA)
     out = np.clip(frame, 0.0, 1.0) ** (1.0 / gamma) * 255.0
     if noise:
         out = out + np.random.default_rng(7).normal(0.0, noise, out.shape)
@@ -194,19 +206,14 @@ def bar_frame(u0: float, v0: float, angle_deg: float, *, lit: float = 1.6,
               dark: float = 0.15) -> np.ndarray:
     """A 128x96 frame of a 44x12 px bar centred on (u0, v0), its long axis at ``angle_deg``
     from the u axis, shaded by a low lamp from the left as ``square_frame``'s part."""
-    height, width = 96, 128
-    rows, cols = np.mgrid[0:height * SAMPLES, 0:width * SAMPLES]
-    x, y = (cols + 0.5) / SAMPLES - 0.5, (rows + 0.5) / SAMPLES - 0.5
+    x, y = _samples()
     a = np.radians(angle_deg)
     along = (x - u0) * np.cos(a) + (y - v0) * np.sin(a)
     across = -(x - u0) * np.sin(a) + (y - v0) * np.cos(a)
     inside = (np.abs(along) <= 22.0) & (np.abs(across) <= 6.0)
     t = np.clip((x - (u0 - 22.0)) / 44.0, 0.0, 1.0)
     shade = dark + (lit - dark) * (1 - t) ** 3
-    linear = np.stack([np.where(inside, c * shade, 0.2) for c in YELLOW], axis=-1)
-    frame = cv2.resize(linear, (width, height), interpolation=cv2.INTER_AREA)
-    return np.clip(np.clip(frame, 0.0, 1.0) ** (1.0 / 2.2) * 255.0 + 0.5, 0, 255
-                   ).astype(np.uint8)
+    return _camera(np.stack([np.where(inside, c * shade, 0.2) for c in YELLOW], axis=-1))
 
 
 @pytest.mark.parametrize("angle", [20.0, 65.0, 110.0])
