@@ -29,8 +29,8 @@ from drivers.core.pose import Pose
 from drivers.core.typed_config import from_mapping, to_mapping
 
 KIND = "gabor"
-FORMAT_VERSION = 8  # 2: max_elongation; 3: channel, nominal_uv_px; 4: nn1_rot; 5: nn1_near;
-# 6: axis; 7: axis.ends; 8: axis.silhouette
+FORMAT_VERSION = 9  # 2: max_elongation; 3: channel, nominal_uv_px; 4: nn1_rot; 5: nn1_near;
+# 6: axis; 7: axis.ends; 8: axis.silhouette; 9: localisation.edge_fill_holes
 POSE_KEYS = ("x_mm", "y_mm", "z_mm", "o_deg", "a_deg", "t_deg")
 
 
@@ -68,8 +68,9 @@ class ModelBundle(TaughtModel):
     # A version-4 file has no near net: it loads with nn1_rot in its place, never used
     # (near_mm 0), so it perceives as it did; files before version 6 have no axis map, files
     # of version 6 no end map in it (no hidden-end correction: calibration_free.ends), files
-    # before version 8 an axis map read on the features' silhouette.
-    older_versions: ClassVar[tuple[int, ...]] = (4, 5, 6, 7)
+    # before version 8 an axis map read on the features' silhouette, files before version 9
+    # a colour edge that reads the rims of the part's holes too.
+    older_versions: ClassVar[tuple[int, ...]] = (4, 5, 6, 7, 8)
 
     gabor: GaborConfig
     nn1: NumpyMLP

@@ -94,6 +94,9 @@ class FrontEnd:
         edge_gamma: the camera's output gamma, with which the part's edge is read from the
             frame's colour (``localise.colour_centre``); 0: from the localisation channel's
             grey levels (``localise.subpixel_centre``; model files written before it).
+        edge_fill_holes: with ``edge_gamma``, the centre is that of the part's outer outline,
+            its holes counted as part (``ColourEdge.fill_holes``); False in model files
+            written before it, which read the holes' rims as edges too.
     """
 
     frame_height_px: int
@@ -114,11 +117,16 @@ class FrontEnd:
     taught_outline_px: tuple[tuple[float, float], ...] | None = None
     turned_outlines_px: tuple[tuple[float, tuple[tuple[float, float], ...]], ...] = ()
     edge_gamma: float = 0.0
+    edge_fill_holes: bool = False
 
     def __post_init__(self) -> None:
         gamma = self.edge_gamma
+        if not isinstance(self.edge_fill_holes, bool):
+            raise ConfigError(f"front end: edge_fill_holes must be true or false, got "
+                              f"{self.edge_fill_holes!r}")
         try:  # 0: grey levels; any other value is a camera gamma (ColourEdge checks it)
-            edge = None if not isinstance(gamma, bool) and gamma == 0 else ColourEdge(gamma)
+            edge = None if not isinstance(gamma, bool) and gamma == 0 else \
+                ColourEdge(gamma, self.edge_fill_holes)
         except ConfigError as exc:
             raise ConfigError(f"front end: edge_gamma must be 0 (grey levels) or a number in "
                               f"1..3, got {gamma!r}") from exc
@@ -355,14 +363,16 @@ class FrontEnd:
                                  else [list(p) for p in self.taught_outline_px],
                                  "turned_outlines_px": [[t, [list(p) for p in o]]
                                                         for t, o in self.turned_outlines_px],
-                                 "edge_gamma": self.edge_gamma}}
+                                 "edge_gamma": self.edge_gamma,
+                                 "edge_fill_holes": self.edge_fill_holes}}
 
     @classmethod
     def from_info(cls, info: Mapping[str, Any]) -> FrontEnd:
         """Inverse of ``to_info``. ``localisation.channel``, ``nominal_uv_px``, ``chroma``,
         ``feature_floor``, ``feature_ceiling``, ``taught_area_px``, ``taught_outline_px``,
-        ``turned_outlines_px`` and ``edge_gamma`` may be absent (model files written before
-        they were stored): "max", None, None, 0, 0, None, None, none and 0.
+        ``turned_outlines_px``, ``edge_gamma`` and ``edge_fill_holes`` may be absent (model
+        files written before they were stored): "max", None, None, 0, 0, None, None, none, 0
+        and false.
 
         Args:
             info: a model file's JSON (at least ``frame_px``, ``intensity``,
@@ -387,7 +397,7 @@ class FrontEnd:
                    float(loc.get("feature_ceiling", 0.0)),
                    None if taught is None else float(taught),
                    loc.get("taught_outline_px"), loc.get("turned_outlines_px", ()),
-                   loc.get("edge_gamma", 0.0))
+                   loc.get("edge_gamma", 0.0), loc.get("edge_fill_holes", False))
 
 
 def _outline(points: Any, name: str) -> tuple[tuple[float, float], ...]:

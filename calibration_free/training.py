@@ -216,7 +216,7 @@ def prepare_training(sets: dict[str, Dataset], polarity: Polarity = "bright",
     logger.info("localisation channel %s (separability %s)", channel,
                 ", ".join(f"{c} {v[1]:.2f}" for c, v in otsu.items()))
 
-    edge = ColourEdge(edge_gamma) if edge_gamma else None
+    edge = ColourEdge(edge_gamma, fill_holes=True) if edge_gamma else None
 
     def find(name: str, area: float | None) -> list[Localisation]:
         return [localise(n, threshold, area, polarity=polarity) for n in located[name]]
@@ -269,7 +269,7 @@ def prepare_training(sets: dict[str, Dataset], polarity: Polarity = "bright",
                      feature_ceiling=FEATURE_CEILING if channel == "saturation" else 0.0,
                      taught_area_px=float(np.mean(taught)) if taught else None,
                      taught_outline_px=outline, turned_outlines_px=turned,
-                     edge_gamma=float(edge_gamma))
+                     edge_gamma=float(edge_gamma), edge_fill_holes=bool(edge_gamma))
     return PreparedSets(front, located, found, usable, time.perf_counter() - start)
 
 

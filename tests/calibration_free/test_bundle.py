@@ -145,7 +145,8 @@ def test_a_file_in_the_version_4_layout_loads_and_is_still_written(bundle, cell,
                                        "turned_outlines_px": [
                                            [t, [list(p) for p in o]]
                                            for t, o in bundle.front.turned_outlines_px],
-                                       "edge_gamma": bundle.front.edge_gamma}
+                                       "edge_gamma": bundle.front.edge_gamma,
+                                       "edge_fill_holes": bundle.front.edge_fill_holes}
     assert written["frame_px"] == expected["frame_px"]
     assert written["intensity"] == expected["intensity"]
 
@@ -279,6 +280,20 @@ def test_a_version_7_files_axis_map_reads_the_features_silhouette(bundle, tmp_pa
     path.write_bytes(pack(info, tensors, version=7))
     old = ModelBundle.load(path, expect_object="screw")
     assert old.format_version == 7 and old.axis.silhouette == "features"
+
+
+def test_a_version_8_file_reads_the_rims_of_the_parts_holes(bundle, tmp_path):
+    holed = dataclasses.replace(bundle, front=dataclasses.replace(
+        bundle.front, edge_gamma=2.2, edge_fill_holes=True))
+    path = tmp_path / "ledge.bundle"
+    holed.save(path)
+    assert ModelBundle.load(path).front.edge.fill_holes
+    info, tensors = info_and_tensors(holed)
+    del info["localisation"]["edge_fill_holes"]
+    path.write_bytes(pack(info, tensors, version=8))
+    old = ModelBundle.load(path)
+    assert old.format_version == 8 and old.front.edge_gamma == 2.2
+    assert not old.front.edge.fill_holes
 
 
 def test_the_taught_area_is_learned_and_checked(bundle, cell, tmp_path):

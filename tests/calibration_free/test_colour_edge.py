@@ -191,6 +191,56 @@ def test_the_front_end_keeps_its_edge_gamma_in_the_model_file():
         _front(edge_gamma=0.7)
 
 
+def test_the_front_end_keeps_whether_holes_are_filled():
+    front = _front(edge_gamma=2.2, edge_fill_holes=True)
+    assert front.edge == ColourEdge(2.2, fill_holes=True)
+    assert FrontEnd.from_info(front.to_info()).edge.fill_holes
+    info = front.to_info()
+    del info["localisation"]["edge_fill_holes"]  # a model file written before it
+    assert FrontEnd.from_info(info).edge == ColourEdge(2.2)
+    with pytest.raises(ConfigError, match="edge_fill_holes must be true or false"):
+        _front(edge_gamma=2.2, edge_fill_holes="yes")
+    with pytest.raises(ConfigError, match="fill_holes must be true or false"):
+        ColourEdge(2.2, fill_holes=1)
+
+
+def holed_frame(u0: float, v0: float, hole_du: float, *, wall: float) -> np.ndarray:
+    """A 30 px square part centred on (u0, v0), evenly lit, with a round through hole of
+    radius 5 px ``hole_du`` px right of its centre. The hole shows its wall on its left (its
+    part colour times ``wall``, as a lamp falling into it lights it) and the table beneath
+    on its right."""
+    half, radius = 15.0, 5.0
+    x, y = _samples()
+    inside = (np.abs(x - u0) <= half) & (np.abs(y - v0) <= half)
+    dx, dy = x - (u0 + hole_du), y - v0
+    hole = dx * dx + dy * dy <= radius * radius
+    shade = np.where(hole & (dx < 0.0), wall, 1.0)
+    table = 0.2
+    return _camera(np.stack([np.where(inside & ~(hole & (dx >= 0.0)), c * shade, table)
+                             for c in YELLOW], axis=-1))
+
+
+@pytest.mark.parametrize("wall", [0.05, 0.6])
+def test_with_holes_filled_the_centre_is_the_outer_outlines(wall):
+    u0, v0 = 60.4, 47.2
+    image = holed_frame(u0, v0, 6.0, wall=wall)
+    saturation = saturation_image(np.ascontiguousarray(image))
+    loc = localise(saturation, THRESHOLD)
+    assert loc.ok
+    args = (image, loc.u_px, loc.v_px, loc.area_px, loc.part_mask)
+    filled = colour_centre(args[0], ColourEdge(2.2, fill_holes=True), *args[1:])
+    assert abs(filled[0] - u0) < 0.05 and abs(filled[1] - v0) < 0.05
+    # the hole's coverage is the part's: 1 over the whole hole
+    x0, y0, weights = filled[2]
+    assert weights[int(v0) - y0, int(u0 + 6.0) - x0] == 1.0
+    # read as edges, the hole's rim pulls the centre away from it, by how much of the hole
+    # reads as table: what the lamp and the view show of its wall
+    holed = colour_centre(args[0], ColourEdge(2.2), *args[1:])
+    assert holed[0] - u0 < -0.2
+    assert localise(saturation, THRESHOLD, image=image,
+                    edge=ColourEdge(2.2, fill_holes=True)).u_px == pytest.approx(filled[0])
+
+
 def test_the_front_end_reads_the_centre_from_colour_only_with_its_gamma():
     image = square_frame(60.3, 45.7)
     _, grey, colour = _centres(image)
