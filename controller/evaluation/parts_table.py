@@ -133,7 +133,12 @@ def run_parts_table(config, *, system: str = "gabor", trials: int, seed: int,
 
 def _rate(row: dict, budget: str) -> str:
     ci = row["safe_rate_ci"][budget]
-    return f"{ci['rate'] * 100:.0f}% ({ci['low'] * 100:.0f}-{ci['high'] * 100:.0f})"
+    return f"{_percent(ci['rate'])}% ({ci['low'] * 100:.0f}-{ci['high'] * 100:.0f})"
+
+
+def _percent(rate: float) -> str:
+    """A rate in percent to 0.1, without a trailing .0: 199 of 200 is 99.5, not 100."""
+    return f"{rate * 100:.1f}".removesuffix(".0")
 
 
 def _rms(row: dict, budget: str) -> str:

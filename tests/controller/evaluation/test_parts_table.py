@@ -52,6 +52,14 @@ def test_the_table_has_a_row_per_part_and_light_with_intervals():
     assert "gabor, 20 trials per row, seed 3" in table
 
 
+def test_a_rate_short_of_all_is_not_rounded_up_to_100():
+    report = {"system": "gabor", "trials": 200, "seed": 3, "scene": "<defaults>",
+              "wall_seconds": 12.0, "rows": [_row("nut", "poor", 199, 200)]}
+    body = [line for line in parts_markdown(report).splitlines()[2:] if line.startswith("| ")]
+    ci = wilson(199, 200)
+    assert f"| 99.5% ({ci['low'] * 100:.0f}-100) | 100% (98-100) |" in body[0]
+
+
 @pytest.mark.slow
 def test_every_part_is_trained_on_its_default_scene_and_reported(tmp_path, capsys):
     config, out = tmp_path / "grids.yaml", tmp_path / "parts.json"
