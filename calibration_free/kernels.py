@@ -91,6 +91,66 @@ def object_mask(image: np.ndarray, threshold: np.float32, bright: bool):  # prag
     return mask, moments, box
 
 
+@njit("uint8[:, ::1](uint8[:, :])", cache=True, nogil=True, error_model="numpy")
+def filled_blob(blob: np.ndarray) -> np.ndarray:  # pragma: no cover
+    """A copy of ``blob`` (nonzero: the part) that is 255 on the part and on its holes (the
+    background pixels not 4-connected to the window's border) and 0 elsewhere.
+
+    A background pixel with no part pixel on one side of it along its row or its column
+    reaches the border along that line: only the others (inside the blob's row and column
+    spans) can lie in a hole, and a 4-connected set of them is a hole unless it touches one
+    that can reach the border."""
+    height, width = blob.shape
+    out = np.zeros((height, width), np.uint8)
+    row_lo = np.full(height, width, np.int64)
+    row_hi = np.full(height, -1, np.int64)
+    col_lo = np.full(width, height, np.int64)
+    col_hi = np.full(width, -1, np.int64)
+    for i in range(height):
+        for j in range(width):
+            if blob[i, j]:
+                out[i, j] = 255
+                row_lo[i] = min(row_lo[i], j)
+                row_hi[i] = max(row_hi[i], j)
+                col_lo[j] = min(col_lo[j], i)
+                col_hi[j] = max(col_hi[j], i)
+    seen = np.zeros((height, width), np.uint8)
+    stack = np.empty(height * width, np.int64)
+    component = np.empty(height * width, np.int64)
+    for i0 in range(1, height - 1):
+        for j0 in range(row_lo[i0] + 1, row_hi[i0]):
+            if out[i0, j0] or seen[i0, j0] or not col_lo[j0] < i0 < col_hi[j0]:
+                continue
+            seen[i0, j0] = 1
+            stack[0] = i0 * width + j0
+            top, size, hole = 1, 0, True
+            while top:
+                top -= 1
+                k = stack[top]
+                component[size] = k
+                size += 1
+                i, j = k // width, k % width
+                if not (row_lo[i] < j < row_hi[i] and col_lo[j] < i < col_hi[j]):
+                    hole = False  # this one reaches the border along its row or column
+                    continue
+                for y, x in ((i - 1, j), (i + 1, j), (i, j - 1), (i, j + 1)):
+                    if out[y, x]:
+                        continue
+                    if seen[y, x] == 2:  # found outside by an earlier search
+                        hole = False
+                    elif not seen[y, x]:
+                        seen[y, x] = 1
+                        stack[top] = y * width + x
+                        top += 1
+            for n in range(size):
+                y, x = component[n] // width, component[n] % width
+                if hole:
+                    out[y, x] = 255
+                else:
+                    seen[y, x] = 2
+    return out
+
+
 @njit("Tuple((float64, float64, float64))"
       "(float32[:, :], uint8[:, :], uint8[:, :], uint8[:, :], boolean)", cache=True, nogil=True,
       error_model="numpy")

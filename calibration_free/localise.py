@@ -27,7 +27,12 @@ import cv2
 import numpy as np
 
 from calibration_free.errors import ImageError
-from calibration_free.kernels import colour_coverage_moments, coverage_moments, object_mask
+from calibration_free.kernels import (
+    colour_coverage_moments,
+    coverage_moments,
+    filled_blob,
+    object_mask,
+)
 from drivers.core.errors import ConfigError
 
 Status = Literal["ok", "no_object", "ambiguous"]
@@ -283,7 +288,7 @@ def colour_centre(image: np.ndarray, edge: ColourEdge, u_px: float, v_px: float,
     x0, x1, y0, y1 = _blob_window(part_mask.shape, u_px, v_px, area_px, box)
     blob = part_mask[y0:y1, x0:x1]
     if edge.fill_holes:
-        blob = filled(blob)
+        blob = filled_blob(blob)
     band = cv2.dilate(blob, _KERNEL_3)
     weights = np.empty(blob.shape, np.float32)
     m00, m10, m01 = colour_coverage_moments(
@@ -293,14 +298,6 @@ def colour_centre(image: np.ndarray, edge: ColourEdge, u_px: float, v_px: float,
     if not m00 > 0:
         return None
     return x0 + m10 / m00, y0 + m01 / m00, (x0, y0, weights)
-
-
-def filled(blob: np.ndarray) -> np.ndarray:
-    """A copy of the uint8 ``blob`` (nonzero: the part) with its holes, the background
-    pixels not 4-connected to its border, set to 255."""
-    padded = cv2.copyMakeBorder(blob, 1, 1, 1, 1, cv2.BORDER_CONSTANT, value=0)
-    cv2.floodFill(padded, None, (0, 0), 1)  # the background around the blob
-    return np.where(padded[1:-1, 1:-1] == 1, np.uint8(0), np.uint8(255))
 
 
 def _centre(normalised: np.ndarray, polarity: Polarity, u_px: float, v_px: float,

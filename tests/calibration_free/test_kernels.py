@@ -6,7 +6,13 @@ import cv2
 import numpy as np
 import pytest
 
-from calibration_free.kernels import coverage_moments, cut_levels, object_mask, saturation_image
+from calibration_free.kernels import (
+    coverage_moments,
+    cut_levels,
+    filled_blob,
+    object_mask,
+    saturation_image,
+)
 from calibration_free.localise import binarise, elongation
 from calibration_free.preprocess import max_and_saturation_u8
 
@@ -110,3 +116,30 @@ def test_cut_levels_keeps_what_stands_between_the_levels_near_the_part(x0, y0):
     expected = np.where(keep > 0, np.clip(roi - 80.0, 0.0, 100.0), 0.0)
     cut_levels(roi, np.float32(80.0), np.float32(180.0), part, x0, y0, 2)
     np.testing.assert_array_equal(roi, expected.astype(np.float32))
+
+
+def _flood_filled(blob: np.ndarray) -> np.ndarray:
+    """The blob with its holes filled by OpenCV's flood fill of the background from outside."""
+    padded = cv2.copyMakeBorder(blob, 1, 1, 1, 1, cv2.BORDER_CONSTANT, value=0)
+    cv2.floodFill(padded, None, (0, 0), 1)
+    return np.where(padded[1:-1, 1:-1] == 1, np.uint8(0), np.uint8(255))
+
+
+@pytest.mark.parametrize("seed", range(24))
+def test_filled_blob_fills_what_the_background_does_not_reach(seed):
+    rng = np.random.default_rng(seed)
+    specks = 0.02 + 0.3 * seed / 24
+    blob = np.zeros((40, 52), np.uint8)
+    cv2.rectangle(blob, (3, 4), (45, 33), 255, -1)
+    # holes (one open to the border through a 1 px channel), specks, a diagonal-only gap
+    cv2.circle(blob, (15, 18), 5, 0, -1)
+    cv2.line(blob, (30, 0), (30, 20), 0, 1)
+    blob[rng.random(blob.shape) < specks] = 0
+    blob[0, :] = 0
+    blob[-1, :] = 255  # a blob reaching the window's edge
+    window = np.ascontiguousarray(blob[:, 1:])  # and a non-contiguous view of it below
+    np.testing.assert_array_equal(filled_blob(blob[:, 1:]), _flood_filled(window))
+    out = filled_blob(blob)
+    np.testing.assert_array_equal(out, _flood_filled(blob))
+    assert out.dtype == np.uint8 and out.flags.c_contiguous
+    assert (out[blob > 0] == 255).all() and out[18, 15] == 255  # the round hole is filled
