@@ -109,6 +109,10 @@ class PerceptionConfig:
     2-3-2); nn2_weight_decay: L2
     penalty on NN2's weights, so it interpolates between the grid's angles (unset: 1e-2, and
     1e-3 for a part without symmetry, ``calibration_free.training.default_nn2_weight_decay``);
+    nn2_widen_px: NN2 also learns from four copies of each ROI widened on one side by up to
+    this many pixels, as a lamp-lit flank widens the outline (0: none; unset: 1 px for a part
+    of kappa 6 or more, the nut, and none for the others,
+    ``calibration_free.training.default_nn2_widen_px``);
     localisation_channel: the image the part is localised in (``max``: normalised max(R,G,B),
     the paper's; ``saturation``: unchanged by light and shadow for a coloured part; ``auto``:
     whichever separates part and table better in the training images); pca / hough: the
@@ -131,6 +135,7 @@ class PerceptionConfig:
     gabor: GaborConfig = GaborConfig()
     nn2_hidden: tuple[int, ...] = field(default=NN2_HIDDEN, metadata={"min": 1, "max": 4096})
     nn2_weight_decay: float | None = field(default=None, metadata={"min": 0.0})
+    nn2_widen_px: float | None = field(default=None, metadata={"min": 0.0, "max": 5.0})
     localisation_channel: Literal["max", "saturation", "auto"] = "auto"
     pca: PcaConfig = PcaConfig()
     hough: HoughConfig = HoughConfig()

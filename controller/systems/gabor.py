@@ -103,6 +103,7 @@ class GaborSystem(VisionSystem):
             nominal_pose=state.nominal_pose, gabor=perception_cfg.gabor,
             nn2_hidden=tuple(perception_cfg.nn2_hidden),
             nn2_weight_decay=perception_cfg.nn2_weight_decay,
+            nn2_widen_px=perception_cfg.nn2_widen_px,
             localisation_channel=perception_cfg.localisation_channel, seed=perception_cfg.seed,
             nn1_extra=nn2 if perception_cfg.nn1_uses_nn2_set else None,
             fine_axis=perception_cfg.axis, edge_gamma=perception_cfg.edge_gamma)

@@ -7,17 +7,23 @@ import dataclasses
 import numpy as np
 import pytest
 
+from calibration_free import training
 from calibration_free.angles import decode, encode
 from calibration_free.dataset import Dataset, random_offsets
 from calibration_free.errors import ImageError, TrainingError
 from calibration_free.front_end import FEATURE_CEILING, FEATURE_FLOOR, FrontEnd
+from calibration_free.gabor import GaborConfig
 from calibration_free.perception import Perception
 from calibration_free.synthetic import render, render_at
 from calibration_free.training import (
     MIN_NEAR_SAMPLES,
+    NN2_WIDEN_COPIES,
     default_nn2_weight_decay,
+    default_nn2_widen_px,
     near_samples,
     train_bundle,
+    train_nn2,
+    widened_copies,
 )
 from drivers.core.errors import ConfigError
 
@@ -62,6 +68,7 @@ def test_training_records_what_it_did(bundle):
     assert t["nn1_near"]["layers"] == [4, 10, 2] and bundle.near_mm == 5.0
     assert t["nn1_near"]["samples"] == 63 + 7
     assert t["nn2"]["weight_decay"] == default_nn2_weight_decay(KAPPA)
+    assert t["nn2"]["widen_px"] == 0.0  # the cube learns from its 63 ROIs alone
     assert 700 < bundle.front.expected_area_px < 950  # a 30 px rounded square minus its hole
 
 
@@ -142,6 +149,53 @@ def test_nn2_weight_decay_is_looser_for_a_part_without_symmetry():
     # a screw's NN2 maps the whole circle; symmetric parts are held tighter against noise
     decay = {kappa: default_nn2_weight_decay(kappa) for kappa in (1, 2, 4, 6)}
     assert decay[1] < decay[2] == decay[4] == decay[6]
+
+
+def _disc(radius: float, n: int = 50) -> np.ndarray:
+    """A soft disc ROI: 1 inside, a 1 px ramp at ``radius``, 0 beyond."""
+    rows, cols = np.mgrid[0:n, 0:n]
+    r = np.hypot(cols - (n - 1) / 2, rows - (n - 1) / 2)
+    return np.clip(radius + 0.5 - r, 0.0, 1.0).astype(np.float32)
+
+
+def test_widened_copies_widen_the_outline_on_one_side():
+    roi = _disc(12.0)
+    copies = widened_copies([roi, roi], 1.0, 3, np.random.default_rng(4))
+    assert len(copies) == 6
+    again = widened_copies([roi, roi], 1.0, 3, np.random.default_rng(4))
+    assert all(np.array_equal(a, b) for a, b in zip(copies, again, strict=True))
+    rows, cols = np.mgrid[0:50, 0:50]
+    for copy in copies:
+        assert copy.dtype == np.float32 and (copy >= roi).all()
+        extra = copy - roi
+        # only the outline grows, by under a pixel and a half, and on one side
+        assert extra.max() <= 1.0 and extra.sum() < 1.5 * 2 * np.pi * 12.0
+        assert (extra[np.hypot(cols - 24.5, rows - 24.5) < 10.5] == 0).all()
+        u = (extra * (cols - 24.5)).sum() / max(extra.sum(), 1e-9)
+        v = (extra * (rows - 24.5)).sum() / max(extra.sum(), 1e-9)
+        assert extra.sum() == 0 or np.hypot(u, v) > 6.0  # off centre: one side
+
+
+def test_nn2_learns_from_widened_copies_for_a_round_part_only(monkeypatch):
+    # the nut (kappa 6) by default, not the cube, the ledge or the screw; 0 turns them off
+    assert default_nn2_widen_px(6) == 1.0
+    assert [default_nn2_widen_px(k) for k in (1, 2, 4)] == [0.0, 0.0, 0.0]
+    seen = []
+
+    def fake_train(x, y, hidden, **kw):
+        seen.append((x.shape[0], y.copy()))
+        raise RuntimeError("enough")
+    monkeypatch.setattr(training, "train_mlp", fake_train)
+    rois = [_disc(12.0), _disc(13.0)]
+    labels = np.array([5.0, -5.0])
+    for kappa, widen in ((6, None), (4, None), (6, 0.0), (4, 1.0)):
+        with pytest.raises(RuntimeError, match="enough"):
+            train_nn2(rois, labels, kappa, GaborConfig(), seed=0, widen_px=widen)
+    assert [n for n, _ in seen] == [2 * (1 + NN2_WIDEN_COPIES), 2, 2, 2 * (1 + NN2_WIDEN_COPIES)]
+    # each copy keeps its ROI's turn
+    first = seen[0][1]
+    assert np.allclose(first[2:2 + NN2_WIDEN_COPIES], first[0])
+    assert np.allclose(first[2 + NN2_WIDEN_COPIES:], first[1])
 
 
 def test_perception_corrects_random_poses_near_the_nominal(bundle, cell):

@@ -191,7 +191,8 @@ def train_nn2(data: RepeatData, gabor: GaborConfig, perception_cfg) -> TrainedMo
     Args:
         data: the repeat (its base model, seed and training ROIs).
         gabor: the filter bank to train on.
-        perception_cfg: the perception config (``nn2_hidden``, ``nn2_weight_decay``).
+        perception_cfg: the perception config (``nn2_hidden``, ``nn2_weight_decay``,
+            ``nn2_widen_px``).
 
     Returns:
         The base model with ``gabor`` and the new NN2; its train_seconds are NN2's.
@@ -199,7 +200,8 @@ def train_nn2(data: RepeatData, gabor: GaborConfig, perception_cfg) -> TrainedMo
     base = data.base.model
     nn2 = training.train_nn2(data.train.rois, data.train.dphi_deg, base.kappa, gabor,
                              seed=data.seed, hidden=tuple(perception_cfg.nn2_hidden),
-                             weight_decay=perception_cfg.nn2_weight_decay)
+                             weight_decay=perception_cfg.nn2_weight_decay,
+                             widen_px=perception_cfg.nn2_widen_px)
     meta = {**base.training, "nn2": {"layers": list(nn2.model.layer_sizes),
                                      "seconds": nn2.seconds,
                                      "epochs": len(nn2.loss_curve),
