@@ -408,8 +408,9 @@ def train_nn2(rois: np.ndarray | list[np.ndarray], dphi_deg: np.ndarray, kappa: 
     if widen_px is None:
         widen_px = default_nn2_widen_px(kappa)
     if widen_px:
-        rois = list(rois) + widened_copies(list(rois), widen_px, NN2_WIDEN_COPIES,
-                                           np.random.default_rng(seed + 11))
+        rois = list(rois)
+        rois += widened_copies(rois, widen_px, NN2_WIDEN_COPIES,
+                               np.random.default_rng(seed + 11))
         dphi_deg = np.concatenate([dphi_deg, np.repeat(dphi_deg, NN2_WIDEN_COPIES)])
     bank = GaborBank(gabor)
     features = np.stack([bank.features(roi) for roi in rois])
@@ -527,6 +528,10 @@ def train_bundle(nn1_data: Dataset, nn2_data: Dataset, *, object_kind: str, kapp
     rois = [prep.front.feature_roi(prep.normalised["nn2"][i], prep.found["nn2"][i], gabor.roi_px)
             for i in prep.usable["nn2"]]
     nn2_labels = nn2_data.labels[prep.usable["nn2"]]
+    if nn2_weight_decay is None:
+        nn2_weight_decay = default_nn2_weight_decay(kappa)
+    if nn2_widen_px is None:
+        nn2_widen_px = default_nn2_widen_px(kappa)
     nn2 = train_nn2(rois, nn2_labels[:, 2], kappa, gabor, seed=seed,
                     hidden=nn2_hidden, epochs=nn2_epochs, weight_decay=nn2_weight_decay,
                     widen_px=nn2_widen_px)
@@ -557,11 +562,7 @@ def train_bundle(nn1_data: Dataset, nn2_data: Dataset, *, object_kind: str, kapp
         "nn1_near": {**_summary(nn1_near), "zero_offset_mm": nn1_near_zero_offset,
                      "samples": int(near.sum()), "near_mm": near_mm,
                      "weight_decay": default_near_weight_decay(kappa)},
-        "nn2": {**_summary(nn2), "weight_decay": (default_nn2_weight_decay(kappa)
-                                                  if nn2_weight_decay is None
-                                                  else nn2_weight_decay),
-                "widen_px": (default_nn2_widen_px(kappa) if nn2_widen_px is None
-                             else nn2_widen_px)},
+        "nn2": {**_summary(nn2), "weight_decay": nn2_weight_decay, "widen_px": nn2_widen_px},
         "axis": ({"samples": axis.samples, "whole_rms_deg": axis.whole_rms_deg,
                   "near_rms_deg": axis.near_rms_deg, "elongation": axis.elongation,
                   "ends_rms_px": None if axis.ends is None else list(axis.ends.rms_px)}
