@@ -276,9 +276,10 @@ def colour_centre(image: np.ndarray, edge: ColourEdge, u_px: float, v_px: float,
 
     With ``edge.fill_holes`` the blob's holes count as part, and only its outer outline is
     read. What a through hole shows (the table beneath, the hole's far wall) depends on
-    where the part lies in view and on how the lamp falls into it. A ledge's three holes
-    moved its centre by 0.05 px along the bar between good and poor light at the taught
-    pose, and by up to 0.2 px between the part's headings under the lamp.
+    where the part lies in view and on how the lamp falls into it. At the taught pose, over
+    12 headings of a ledge under a side lamp, its three holes moved the nets' reading along
+    the bar by 0.12 mm on average between good and poor light and by 0.07 mm RMS from
+    heading to heading (0.02 and 0.06 mm with the holes filled).
 
     ``box``: the blob's bounding box (x, y, w, h), as for ``subpixel_centre``.
 
