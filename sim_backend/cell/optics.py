@@ -9,7 +9,8 @@ The pipeline, per frame:
 
 1. the renderer's image is taken as display-referred (gamma ``DISPLAY_GAMMA``) and decoded to
    linear light;
-2. lens: the distortion (OpenCV's model: ``x_d = x (1 + k1 r^2 + k2 r^4) + 2 p1 x y +
+2. lens (the render, its samples on a grid turned by ``sample_roll_deg`` against the
+   pixels, resampled through): the distortion (OpenCV's model: ``x_d = x (1 + k1 r^2 + k2 r^4) + 2 p1 x y +
    p2 (r^2 + 2 x^2)``, ``y_d = y (1 + k1 r^2 + k2 r^4) + p1 (r^2 + 2 y^2) + 2 p2 x y`` on
    normalised coordinates, camera matrix ``[[f, 0, cx], [0, f, cy], [0, 0, 1]]`` with
    ``cx = W/2 - 0.5``, ``cy = H/2 - 0.5`` in OpenCV's pixel convention), defocus (a Gaussian
@@ -55,14 +56,14 @@ REALISTIC = {
     "fov_deg": hand_camera.VFOV_DEG, "k1": -0.15, "k2": 0.03, "p1": 0.0005, "p2": -0.0005,
     "vignetting": 0.3, "blur_px": 0.5, "full_well_e": 6000.0, "gamma": 2.2, "bayer": False,
     "jpeg_quality": 0, "auto": True, "target_grey": 110.0, "speed": 0.5, "gain": 1.0,
-    "max_gain": 8.0, "pixel_samples": 2,
+    "max_gain": 8.0, "pixel_samples": 2, "sample_roll_deg": 0.0,
 }
 # Today's pinhole camera: no lens effects, fixed unit exposure, Gaussian noise only.
 IDEAL = {
     "fov_deg": hand_camera.VFOV_DEG, "k1": 0.0, "k2": 0.0, "p1": 0.0, "p2": 0.0,
     "vignetting": 0.0, "blur_px": 0.0, "full_well_e": 0.0, "gamma": DISPLAY_GAMMA,
     "bayer": False, "jpeg_quality": 0, "auto": False, "target_grey": 110.0, "speed": 0.5,
-    "gain": 1.0, "max_gain": 8.0, "pixel_samples": 1,
+    "gain": 1.0, "max_gain": 8.0, "pixel_samples": 1, "sample_roll_deg": 0.0,
 }
 PRESETS = {"realistic": REALISTIC, "ideal": IDEAL}
 _MIN_FACTOR = 0.02  # the smallest exposure x gain auto-exposure goes to
@@ -95,6 +96,7 @@ class CameraModel:
     gain: float
     max_gain: float
     pixel_samples: int
+    sample_roll_deg: float
 
     @property
     def ideal(self) -> bool:
@@ -135,7 +137,7 @@ def resolve_camera(config) -> CameraModel:
     for source, names in ((lens, ("fov_deg", "k1", "k2", "p1", "p2", "vignetting", "blur_px")),
                           (exposure, ("auto", "target_grey", "speed", "gain", "max_gain")),
                           (config, ("bayer", "jpeg_quality", "gamma", "full_well_e",
-                                    "pixel_samples"))):
+                                    "pixel_samples", "sample_roll_deg"))):
         for name in names:
             value = getattr(source, name)
             if value is not None:
@@ -221,6 +223,11 @@ class LensGeometry:
 
     The render has the delivered image's focal length and is just wide enough to cover every
     delivered pixel's undistorted ray (so a barrel lens sees more than the pinhole would).
+    With ``sample_roll_deg`` it is taken by a camera turned by that much about the optical
+    axis, and the maps turn it back: its samples (``pixel_samples`` per pixel side) then lie
+    on a grid turned against the sensor's pixels, and an edge parallel to the pixel rows
+    covers them one after another as it moves instead of a whole row of them at once
+    (rotated-grid supersampling).
 
     Attributes:
         width_px, height_px: the render's size; vfov_deg: its vertical field of view.
@@ -233,8 +240,10 @@ class LensGeometry:
         f = model.focal_px
         k = model.camera_matrix()
         w, h = hand_camera.WIDTH_PX, hand_camera.HEIGHT_PX
+        roll = math.radians(model.sample_roll_deg)
+        self._roll = (math.cos(roll), math.sin(roll))
         xd, yd = _border_normalized(model)
-        xb, yb = undistort_normalized(xd, yd, model.distortion)
+        xb, yb = self._rolled(*undistort_normalized(xd, yd, model.distortion))
         half_w = max(float(np.abs(xb).max()) * f, w / 2.0)
         half_h = max(float(np.abs(yb).max()) * f, h / 2.0)
         self.width_px = 2 * math.ceil(half_w + 2.0)
@@ -242,13 +251,29 @@ class LensGeometry:
         self.focal_px = f
         self.vfov_deg = 2.0 * math.degrees(math.atan(self.height_px / 2.0 / f))
         v, u = np.mgrid[0:h, 0:w].astype(float)
-        xu, yu = undistort_normalized((u - k[0, 2]) / f, (v - k[1, 2]) / f, model.distortion)
+        xu, yu = self._rolled(*undistort_normalized((u - k[0, 2]) / f, (v - k[1, 2]) / f,
+                                                     model.distortion))
         self.map_u = (xu * f + self.width_px / 2.0 - 0.5).astype(np.float32)
         self.map_v = (yu * f + self.height_px / 2.0 - 0.5).astype(np.float32)
         r2 = (u - k[0, 2]) ** 2 + (v - k[1, 2]) ** 2
         r2_corner = (w / 2.0) ** 2 + (h / 2.0) ** 2
         self.vignette = (1.0 - model.vignetting * r2 / r2_corner).astype(np.float32)
         self._rays: np.ndarray | None = None
+
+    def _rolled(self, x: np.ndarray, y: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """The render's normalised coordinates of the camera's (x, y): the render is the
+        camera turned by ``sample_roll_deg`` about its optical axis."""
+        c, s = self._roll
+        return c * x + s * y, -s * x + c * y
+
+    def render_in_camera(self) -> np.ndarray:
+        """4x4 pose of the render's camera in the camera's frame: turned by
+        ``sample_roll_deg`` about the optical axis (x towards y), so that its sample rows
+        cross the sensor's pixel rows."""
+        c, s = self._roll
+        t = np.eye(4)
+        t[:2, :2] = [[c, -s], [s, c]]
+        return t
 
     def projection_matrix(self) -> list[float]:
         """The render's projection for PyBullet's getCameraImage."""

@@ -715,6 +715,12 @@ class SimCell:
         """4x4 pose (mm) of the hand camera (x right, y down, z forward)."""
         return self._tool_true @ hand_camera.camera_in_tool(self._mount)
 
+    def _render_camera(self) -> np.ndarray:
+        cam = self.camera_to_world()
+        if self._optics is None:
+            return cam
+        return cam @ self._optics.geometry.render_in_camera()
+
     def _render_raw(self) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """The pinhole render: the delivered image's size, or the wider one the lens's
         distortion is resampled from (``optics.LensGeometry``)."""
@@ -728,7 +734,7 @@ class SimCell:
             projection = geometry.projection_matrix()
         n = self.camera_model.pixel_samples
         _, _, rgba, depth, seg = p.getCameraImage(
-            width * n, height * n, hand_camera.view_matrix(self.camera_to_world()), projection,
+            width * n, height * n, hand_camera.view_matrix(self._render_camera()), projection,
             lightDirection=list(light.direction), lightColor=list(light.color),
             lightAmbientCoeff=light.ambient, lightDiffuseCoeff=light.diffuse,
             lightSpecularCoeff=light.specular, shadow=0, renderer=p.ER_TINY_RENDERER,
@@ -750,7 +756,7 @@ class SimCell:
         the configured optics and sensor (``optics``) and, when ``noisy``, with its noise."""
         rgb, depth, seg = self._render_raw()
         if self.light.casts_shadows:
-            cam = self.camera_to_world()
+            cam = self._render_camera()
             centre = self._shadow_centre(cam)
             rays = None if self._optics is None else self._optics.geometry.pixel_rays()
             rgb = self._shadow_map.apply(rgb, depth, seg, cam, self.light, centre,

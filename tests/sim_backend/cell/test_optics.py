@@ -8,6 +8,7 @@ import numpy as np
 import pytest
 
 from drivers.core.errors import ConfigError
+from drivers.core.pose import ToolStep
 from drivers.core.typed_config import from_mapping
 from sim_backend.cell import hand_camera, optics
 from sim_backend.cell.scene_config import (
@@ -58,18 +59,22 @@ def test_mount_tilts_rolls_pans_and_offsets_the_camera():
     assert np.allclose(moved[:3, 3] - std[:3, 3], [1.0, -2.0, 3.0])
 
 
-def test_distorted_point_lands_where_cv2_project_points_puts_it():
-    model = _plain(k1=-0.25, k2=0.06, p1=0.001, p2=-0.0008, fov_deg=60.0)
+@pytest.mark.parametrize("roll_deg", [0.0, 7.0, 30.0])
+def test_distorted_point_lands_where_cv2_project_points_puts_it(roll_deg):
+    model = _plain(k1=-0.25, k2=0.06, p1=0.001, p2=-0.0008, fov_deg=60.0,
+                   sample_roll_deg=roll_deg)
     geometry = optics.LensGeometry(model)
     point = np.array([[38.0, -27.0, 120.0]])  # camera frame, mm: towards a corner
     expected, _ = cv2.projectPoints(point, np.zeros(3), np.zeros(3), model.camera_matrix(),
                                     model.distortion)
     expected = expected.reshape(2)
     assert np.allclose(optics.project_points(point, model)[0], expected, atol=1e-9)
-    # A small bright spot at the point's pinhole position in the wide render...
+    # A small bright spot at the point's pinhole position in the wide render (taken by the
+    # camera turned by roll_deg about its axis)...
     f = geometry.focal_px
-    uc = point[0, 0] / point[0, 2] * f + geometry.width_px / 2.0 - 0.5
-    vc = point[0, 1] / point[0, 2] * f + geometry.height_px / 2.0 - 0.5
+    in_render = np.linalg.inv(geometry.render_in_camera())[:3, :3] @ point[0]
+    uc = in_render[0] / in_render[2] * f + geometry.width_px / 2.0 - 0.5
+    vc = in_render[1] / in_render[2] * f + geometry.height_px / 2.0 - 0.5
     v, u = np.mgrid[0:geometry.height_px, 0:geometry.width_px]
     spot = np.exp(-((u - uc) ** 2 + (v - vc) ** 2) / (2 * 1.2**2)).astype(np.float32)
     # ...lands, through the lens, where OpenCV projects the point.
@@ -214,3 +219,50 @@ def test_each_pixel_integrates_over_its_area():
     assert np.abs(grey[2] - grey[1]).mean() < 3.0  # the same scene, only its edges differ
     with pytest.raises(ConfigError, match="pixel_samples"):
         from_mapping(CameraConfig, {"pixel_samples": 0}, "scene.camera")
+
+
+def _outline_rows(roll_deg: float) -> np.ndarray:
+    """(tool x offset mm, the part's image row) as the tool steps along x over the cube,
+    whose near and far edges lie along the pixel rows."""
+    scene = SceneConfig(camera=CameraConfig(noise_std=0.0, full_well_e=0.0,
+                                            exposure=ExposureConfig(auto=False),
+                                            sample_roll_deg=roll_deg))
+    rows = []
+    with SimCell(scene, seed=3) as cell:
+        nominal = cell.nominal_grasp_pose()
+        for dx in np.linspace(-0.3, 0.3, 25):
+            cell.move_arm(nominal.moved_in_tool_frame(ToolStep(dx_mm=float(dx))))
+            rgb = cell.render(noisy=False).astype(float)
+            top = rgb.max(axis=2)
+            weight = np.clip(((top - rgb.min(axis=2)) / np.maximum(top, 1.0) - 0.3) / 0.4, 0, 1)
+            rows.append((cell.ground_truth_error()[0],
+                         (weight * np.mgrid[0:H, 0:W][0]).sum() / weight.sum()))
+    return np.array(rows)
+
+
+def test_a_turned_sample_grid_moves_an_edge_along_the_rows_smoothly():
+    # On the pixel grid the 2 x 2 samples of a whole row flip at once as the edge crosses
+    # them: the part's row stands still over about 0.15 mm of travel and then jumps by
+    # 0.15 px. On a grid turned by 7 deg the samples along the edge flip one after another.
+    fits = {}
+    for roll in (0.0, 7.0):
+        rows = _outline_rows(roll)
+        slope, offset = np.polyfit(rows[:, 0], rows[:, 1], 1)
+        fits[roll] = (slope, float(np.std(rows[:, 1] - (slope * rows[:, 0] + offset))),
+                      float(np.abs(np.diff(rows[:, 1])).max()))
+    (slope0, residual0, jump0), (slope7, residual7, jump7) = fits[0.0], fits[7.0]
+    assert 0.85 < slope0 < 1.0 and 0.85 < slope7 < 1.0  # px per mm: the same image scale
+    assert residual7 < 0.015 < 0.025 < residual0  # px (0.009 and 0.033 measured)
+    assert jump7 < 0.08 < 0.12 < jump0  # the largest step between 0.025 mm moves
+
+
+def test_a_turned_sample_grid_renders_the_same_image():
+    images = {}
+    for roll in (0.0, 7.0):
+        scene = SceneConfig(camera=CameraConfig(preset="ideal", pixel_samples=2,
+                                                noise_std=0.0, sample_roll_deg=roll))
+        with SimCell(scene, seed=3) as cell:
+            images[roll] = cell.render(noisy=False).astype(np.int16)
+    assert np.abs(images[7.0] - images[0.0]).mean() < 1.0  # only along edges, by a grey
+    with pytest.raises(ConfigError, match="sample_roll_deg"):
+        from_mapping(CameraConfig, {"sample_roll_deg": 50}, "scene.camera")
