@@ -10,9 +10,10 @@ The pipeline, per frame:
 1. the renderer's image is taken as display-referred (gamma ``DISPLAY_GAMMA``) and decoded to
    linear light;
 2. lens (the render, its samples on a grid turned by ``sample_roll_deg`` against the
-   pixels, resampled through): the distortion (OpenCV's model: ``x_d = x (1 + k1 r^2 + k2 r^4) + 2 p1 x y +
-   p2 (r^2 + 2 x^2)``, ``y_d = y (1 + k1 r^2 + k2 r^4) + p1 (r^2 + 2 y^2) + 2 p2 x y`` on
-   normalised coordinates, camera matrix ``[[f, 0, cx], [0, f, cy], [0, 0, 1]]`` with
+   pixels, resampled through): the distortion (OpenCV's model:
+   ``x_d = x (1 + k1 r^2 + k2 r^4) + 2 p1 x y + p2 (r^2 + 2 x^2)``,
+   ``y_d = y (1 + k1 r^2 + k2 r^4) + p1 (r^2 + 2 y^2) + 2 p2 x y`` on normalised coordinates,
+   camera matrix ``[[f, 0, cx], [0, f, cy], [0, 0, 1]]`` with
    ``cx = W/2 - 0.5``, ``cy = H/2 - 0.5`` in OpenCV's pixel convention), defocus (a Gaussian
    blur) and vignetting (light falling off with the squared distance from the image centre,
    corners losing ``vignetting``);

@@ -163,11 +163,12 @@ class CameraConfig:
     kept; 1: linear output); bayer: a Bayer colour mosaic demosaiced into RGB; jpeg_quality:
     JPEG compression quality (0: none); pixel_samples: renderer samples per pixel side, averaged
     (a sensor pixel integrates the light over its area; 1: one point sample a pixel, every edge
-    snapped to the pixel grid); sample_roll_deg: those samples' grid turned by this against the
-    sensor's pixel rows (0: on the pixel grid, where an edge parallel to the rows moves in
-    steps of 1 / pixel_samples px; see ``optics.LensGeometry``). mount: the change from the standard mount the cell
-    is taught and trained with; test_mount: a different mount the cell is tested with
-    (``finepos evaluate``: the camera knocked after training; None: the same).
+    snapped to the pixel grid); sample_roll_deg: those samples' grid turned by this against
+    the sensor's pixel rows (0: on the pixel grid, where an edge parallel to the rows moves in
+    steps of 1 / pixel_samples px; see ``optics.LensGeometry``). mount: the change from the
+    standard mount the cell is taught and trained with; test_mount: a different mount the
+    cell is tested with (``finepos evaluate``: the camera knocked after training; None: the
+    same).
     """
 
     preset: CameraPreset = "realistic"
