@@ -716,6 +716,8 @@ class SimCell:
         return self._tool_true @ hand_camera.camera_in_tool(self._mount)
 
     def _render_camera(self) -> np.ndarray:
+        """4x4 pose (mm) of the camera the scene is rendered through: the hand camera, turned
+        about its axis by the lens's ``sample_roll_deg`` (``optics.LensGeometry``)."""
         cam = self.camera_to_world()
         if self._optics is None:
             return cam
