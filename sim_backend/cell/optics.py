@@ -7,8 +7,8 @@ into the frame the camera delivers, keeping the auto-exposure's state from frame
 
 The pipeline, per frame:
 
-1. the renderer's image is taken as display-referred (gamma ``DISPLAY_GAMMA``) and decoded to
-   linear light;
+1. the renderer's samples, cast shadows shaded in, are taken as display-referred (gamma
+   ``DISPLAY_GAMMA``), and each pixel's are averaged in linear light (``integrate_samples``);
 2. lens (the render, its samples on a grid turned by ``sample_roll_deg`` against the
    pixels, resampled through): the distortion (OpenCV's model:
    ``x_d = x (1 + k1 r^2 + k2 r^4) + 2 p1 x y + p2 (r^2 + 2 x^2)``,
@@ -50,14 +50,16 @@ DISPLAY_GAMMA = 2.2  # the renderer's output taken as display-referred with this
 # and a colour sensor's mosaic is demosaiced at its full resolution, before binning: at
 # 192x144 no mosaic pattern is left (bayer: true demosaics at the delivered resolution, a
 # camera without binning). Each pixel integrates the light over its area (the renderer takes
-# pixel_samples x pixel_samples samples a pixel and averages them): an edge across a pixel
-# gives a grey in between, so the part's outline moves in fractions of a pixel, as on a real
-# sensor; one sample a pixel snaps every edge to the pixel grid.
+# pixel_samples x pixel_samples samples a pixel, each shaded and shadowed, and their light is
+# averaged: ``integrate_samples``): an edge across a pixel gives a grey in between, so the
+# part's outline moves in fractions of a pixel, as on a real sensor; one sample a pixel snaps
+# every edge to the pixel grid. The samples' grid is turned by sample_roll_deg against the
+# pixels, so that an edge along the pixel rows also moves smoothly (``LensGeometry``).
 REALISTIC = {
     "fov_deg": hand_camera.VFOV_DEG, "k1": -0.15, "k2": 0.03, "p1": 0.0005, "p2": -0.0005,
     "vignetting": 0.3, "blur_px": 0.5, "full_well_e": 6000.0, "gamma": 2.2, "bayer": False,
     "jpeg_quality": 0, "auto": True, "target_grey": 110.0, "speed": 0.5, "gain": 1.0,
-    "max_gain": 8.0, "pixel_samples": 2, "sample_roll_deg": 0.0,
+    "max_gain": 8.0, "pixel_samples": 2, "sample_roll_deg": 7.0,
 }
 # Today's pinhole camera: no lens effects, fixed unit exposure, Gaussian noise only.
 IDEAL = {
@@ -281,10 +283,13 @@ class LensGeometry:
         return hand_camera.perspective(self.vfov_deg, self.width_px / self.height_px,
                                        hand_camera.NEAR_MM, hand_camera.FAR_MM)
 
-    def pixel_rays(self) -> np.ndarray:
-        """(H, W, 3) camera-frame rays of the render's pixels (for the shadow map)."""
+    def sample_rays(self) -> np.ndarray:
+        """(H n, W n, 3) camera-frame rays through the render's samples, ``pixel_samples`` (n)
+        a pixel side (for the shadow map, which shades each sample)."""
         if self._rays is None:
-            self._rays = hand_camera.pixel_rays(self.width_px, self.height_px, self.focal_px)
+            n = self.model.pixel_samples
+            self._rays = hand_camera.pixel_rays(self.width_px * n, self.height_px * n,
+                                                self.focal_px * n)
         return self._rays
 
     def resample(self, image: np.ndarray, nearest: bool = False) -> np.ndarray:
@@ -312,8 +317,8 @@ class CameraPipeline:
         self.last_mean_grey: float | None = None
 
     def process(self, render_rgb: np.ndarray, noisy: bool = True) -> np.ndarray:
-        """The frame (144x192x3 uint8 RGB) for one render (the render's size, uint8 RGB);
-        updates the auto-exposure."""
+        """The frame (144x192x3 uint8 RGB) for one render (the render's size, RGB levels
+        0..255: uint8, or float32 from ``integrate_samples``); updates the auto-exposure."""
         m = self.model
         linear = (render_rgb.astype(np.float32) / 255.0) ** DISPLAY_GAMMA
         linear = self.geometry.resample(linear)
@@ -355,6 +360,22 @@ class CameraPipeline:
         error = (m.target_grey / max(mean_grey, 1.0)) ** m.gamma
         self.factor = float(np.clip(self.factor * error ** m.speed, _MIN_FACTOR,
                                     MAX_EXPOSURE * m.max_gain))
+
+
+def integrate_samples(rgb: np.ndarray, samples: int) -> np.ndarray:
+    """Each pixel's light integrated over its area: the mean, in linear light, of the
+    ``samples`` x ``samples`` display-referred (``DISPLAY_GAMMA``) samples of a render
+    (H n x W n x 3 uint8), as display-referred float32 levels (H x W x 3). Averaging the
+    encoded levels instead would read an edge pixel half part, half table as darker than the
+    mean of their light."""
+    if samples == 1:
+        return rgb.astype(np.float32)
+    height, width = rgb.shape[0] // samples, rgb.shape[1] // samples
+    linear = _DECODE[rgb].reshape(height, samples, width, samples, 3).mean(axis=(1, 3))
+    return (255.0 * linear ** (1.0 / DISPLAY_GAMMA)).astype(np.float32)
+
+
+_DECODE = ((np.arange(256) / 255.0) ** DISPLAY_GAMMA).astype(np.float32)
 
 
 def mosaic(rgb: np.ndarray) -> np.ndarray:

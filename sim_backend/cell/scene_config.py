@@ -161,11 +161,12 @@ class CameraConfig:
     ``realistic`` shot noise comes on top); full_well_e: electrons a pixel holds (sets the
     shot noise; 0: none); gamma: the camera's output gamma (2.2: the renderer's tone curve
     kept; 1: linear output); bayer: a Bayer colour mosaic demosaiced into RGB; jpeg_quality:
-    JPEG compression quality (0: none); pixel_samples: renderer samples per pixel side, averaged
-    (a sensor pixel integrates the light over its area; 1: one point sample a pixel, every edge
-    snapped to the pixel grid); sample_roll_deg: those samples' grid turned by this against
-    the sensor's pixel rows (0: on the pixel grid, where an edge parallel to the rows moves in
-    steps of 1 / pixel_samples px; see ``optics.LensGeometry``). mount: the change from the
+    JPEG compression quality (0: none); pixel_samples: renderer samples per pixel side, their
+    light averaged (a sensor pixel integrates the light over its area; 1: one point sample a
+    pixel, every edge snapped to the pixel grid); sample_roll_deg: those samples' grid turned
+    by this against the sensor's pixel rows (``realistic``: 7; 0: on the pixel grid, where an
+    edge parallel to the rows moves in steps of 1 / pixel_samples px; see
+    ``optics.LensGeometry``). mount: the change from the
     standard mount the cell is taught and trained with; test_mount: a different mount the
     cell is tested with (``finepos evaluate``: the camera knocked after training; None: the
     same).

@@ -19,7 +19,6 @@ import logging
 import math
 from dataclasses import dataclass
 
-import cv2
 import numpy as np
 
 from drivers.core.errors import MotionRejectedError
@@ -723,9 +722,10 @@ class SimCell:
             return cam
         return cam @ self._optics.geometry.render_in_camera()
 
-    def _render_raw(self) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-        """The pinhole render: the delivered image's size, or the wider one the lens's
-        distortion is resampled from (``optics.LensGeometry``)."""
+    def _render_samples(self) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """The pinhole render at ``pixel_samples`` x ``pixel_samples`` samples a pixel
+        (display-referred uint8 RGB, depth buffer, body ids): the delivered image's size, or
+        the wider one the lens's distortion is resampled from (``optics.LensGeometry``)."""
         light = self.light
         if self._optics is None:
             width, height = hand_camera.WIDTH_PX, hand_camera.HEIGHT_PX
@@ -745,26 +745,25 @@ class SimCell:
         rgb = np.reshape(np.asarray(rgba, dtype=np.uint8), (*shape, 4))[:, :, :3]
         depth = np.reshape(np.asarray(depth, dtype=np.float32), shape)
         seg = np.reshape(np.asarray(seg, dtype=np.int32), shape)
-        if n > 1:
-            # each pixel integrates over its area (optics.REALISTIC); depth and the body ids,
-            # which only say what lies where, are the sample nearest the pixel's centre
-            rgb = cv2.resize(rgb, (width, height), interpolation=cv2.INTER_AREA)
-            depth = np.ascontiguousarray(depth[n // 2::n, n // 2::n])
-            seg = np.ascontiguousarray(seg[n // 2::n, n // 2::n])
         return rgb, depth, seg
 
     def render(self, noisy: bool = True) -> np.ndarray:
         """What the hand camera sees: HxWx3 uint8 RGB (192x144), with cast shadows, through
-        the configured optics and sensor (``optics``) and, when ``noisy``, with its noise."""
-        rgb, depth, seg = self._render_raw()
+        the configured optics and sensor (``optics``) and, when ``noisy``, with its noise.
+
+        Each sample is shaded, its cast shadow included, before a pixel integrates the light
+        of its samples (``optics.integrate_samples``): a pixel on the part's outline holds
+        the part's light and the table's, each as lit where it lies."""
+        rgb, depth, seg = self._render_samples()
         if self.light.casts_shadows:
             cam = self._render_camera()
             centre = self._shadow_centre(cam)
-            rays = None if self._optics is None else self._optics.geometry.pixel_rays()
+            rays = None if self._optics is None else self._optics.geometry.sample_rays()
             rgb = self._shadow_map.apply(rgb, depth, seg, cam, self.light, centre,
                                          self._table_rgba, rays)
         if self._optics is not None:
-            return self._optics.process(rgb, noisy)
+            return self._optics.process(
+                optics.integrate_samples(rgb, self.camera_model.pixel_samples), noisy)
         std = self.scene.camera.noise_std
         if noisy and std > 0:
             noise = self._noise_rng.standard_normal(rgb.shape, dtype=np.float32) * std
@@ -782,7 +781,9 @@ class SimCell:
     def render_labels(self) -> np.ndarray:
         """HxW int labels of what each camera pixel shows: LABEL_BACKGROUND (table, nothing),
         LABEL_PART, LABEL_ROBOT, LABEL_OCCLUDER, LABEL_CLUTTER."""
-        _, _, seg = self._render_raw()
+        _, _, seg = self._render_samples()
+        n = self.camera_model.pixel_samples
+        seg = np.ascontiguousarray(seg[n // 2::n, n // 2::n])  # the sample at a pixel's centre
         if self._optics is not None:
             seg = self._optics.geometry.resample(seg, nearest=True)
         out = np.full(seg.shape, LABEL_BACKGROUND, dtype=np.int32)

@@ -221,6 +221,31 @@ def test_each_pixel_integrates_over_its_area():
         from_mapping(CameraConfig, {"pixel_samples": 0}, "scene.camera")
 
 
+def test_a_pixel_averages_its_samples_light_not_their_levels():
+    # half its samples at full light, half dark: half the light, which a gamma of 2.2
+    # encodes as level 186, not the mean level 127.5 (an edge pixel read too dark)
+    samples = np.zeros((4, 4, 3), np.uint8)
+    samples[:, ::2] = 255
+    pixels = optics.integrate_samples(samples, 2)
+    assert pixels.shape == (2, 2, 3) and pixels.dtype == np.float32
+    assert np.allclose(pixels, 255.0 * 0.5 ** (1 / optics.DISPLAY_GAMMA), atol=1e-3)
+    flat = np.full((4, 4, 3), 77, np.uint8)
+    assert np.allclose(optics.integrate_samples(flat, 2), 77.0, atol=1e-3)
+    assert np.array_equal(optics.integrate_samples(flat, 1), flat.astype(np.float32))
+
+
+def test_the_shadow_map_shades_each_sample_through_its_own_ray():
+    # the rays of a pixel's 2 x 2 samples surround the pixel's own ray
+    model = optics.resolve_camera(CameraConfig())
+    assert model.pixel_samples == 2 and model.sample_roll_deg == 7.0  # the realistic default
+    geometry = optics.LensGeometry(model)
+    rays = geometry.sample_rays()
+    assert rays.shape == (geometry.height_px * 2, geometry.width_px * 2, 3)
+    centres = rays.reshape(geometry.height_px, 2, geometry.width_px, 2, 3).mean(axis=(1, 3))
+    assert np.allclose(centres, hand_camera.pixel_rays(geometry.width_px, geometry.height_px,
+                                                       geometry.focal_px))
+
+
 def _outline_rows(roll_deg: float) -> np.ndarray:
     """(tool x offset mm, the part's image row) as the tool steps along x over the cube,
     whose near and far edges lie along the pixel rows."""
@@ -252,8 +277,8 @@ def test_a_turned_sample_grid_moves_an_edge_along_the_rows_smoothly():
                       float(np.abs(np.diff(rows[:, 1])).max()))
     (slope0, residual0, jump0), (slope7, residual7, jump7) = fits[0.0], fits[7.0]
     assert 0.85 < slope0 < 1.0 and 0.85 < slope7 < 1.0  # px per mm: the same image scale
-    assert residual7 < 0.015 < 0.025 < residual0  # px (0.009 and 0.033 measured)
-    assert jump7 < 0.08 < 0.12 < jump0  # the largest step between 0.025 mm moves
+    assert residual7 < 0.02 < 0.03 < residual0  # px (0.015 and 0.038 measured)
+    assert jump7 < 0.08 < 0.12 < jump0  # the largest step between 0.025 mm moves (0.07, 0.19)
 
 
 def test_a_turned_sample_grid_renders_the_same_image():
