@@ -317,11 +317,15 @@ class CameraPipeline:
         self.last_mean_grey: float | None = None
 
     def process(self, render_rgb: np.ndarray, noisy: bool = True) -> np.ndarray:
-        """The frame (144x192x3 uint8 RGB) for one render (the render's size, RGB levels
-        0..255: uint8, or float32 from ``integrate_samples``); updates the auto-exposure."""
+        """The frame (144x192x3 uint8 RGB) for one render (the render's size, uint8 RGB
+        display-referred levels, ``DISPLAY_GAMMA``); updates the auto-exposure."""
+        return self.process_light(_DECODE[render_rgb], noisy)
+
+    def process_light(self, light: np.ndarray, noisy: bool = True) -> np.ndarray:
+        """``process`` for a render already in linear light (the render's size, RGB float32
+        0..1: ``integrate_samples``)."""
         m = self.model
-        linear = (render_rgb.astype(np.float32) / 255.0) ** DISPLAY_GAMMA
-        linear = self.geometry.resample(linear)
+        linear = self.geometry.resample(light)
         if m.blur_px > 0:
             linear = cv2.GaussianBlur(linear, (0, 0), m.blur_px)
         linear = linear * self.geometry.vignette[:, :, None]
@@ -365,14 +369,15 @@ class CameraPipeline:
 def integrate_samples(rgb: np.ndarray, samples: int) -> np.ndarray:
     """Each pixel's light integrated over its area: the mean, in linear light, of the
     ``samples`` x ``samples`` display-referred (``DISPLAY_GAMMA``) samples of a render
-    (H n x W n x 3 uint8), as display-referred float32 levels (H x W x 3). Averaging the
-    encoded levels instead would read an edge pixel half part, half table as darker than the
-    mean of their light."""
+    (H n x W n x 3 uint8), as linear light (H x W x 3 float32, 0..1;
+    ``CameraPipeline.process_light``). Averaging the encoded levels instead would read an
+    edge pixel half part, half table as darker than the mean of their light."""
+    linear = _DECODE[rgb]
     if samples == 1:
-        return rgb.astype(np.float32)
+        return linear
     height, width = rgb.shape[0] // samples, rgb.shape[1] // samples
-    linear = _DECODE[rgb].reshape(height, samples, width, samples, 3).mean(axis=(1, 3))
-    return (255.0 * linear ** (1.0 / DISPLAY_GAMMA)).astype(np.float32)
+    return linear.reshape(height, samples, width, samples, 3).mean(axis=(1, 3),
+                                                                    dtype=np.float32)
 
 
 _DECODE = ((np.arange(256) / 255.0) ** DISPLAY_GAMMA).astype(np.float32)

@@ -762,7 +762,7 @@ class SimCell:
             rgb = self._shadow_map.apply(rgb, depth, seg, cam, self.light, centre,
                                          self._table_rgba, rays)
         if self._optics is not None:
-            return self._optics.process(
+            return self._optics.process_light(
                 optics.integrate_samples(rgb, self.camera_model.pixel_samples), noisy)
         std = self.scene.camera.noise_std
         if noisy and std > 0:
