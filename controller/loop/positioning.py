@@ -30,6 +30,7 @@ from pathlib import Path
 from typing import Any, Literal, Protocol
 
 import cv2
+import numpy as np
 
 from controller.loop.iteration_log import IterationLog
 from controller.loop.record import IterationRecord, LoopKind
@@ -71,10 +72,15 @@ class LoopConfig:
     grid's largest displacement) is not taken: the blob is not the taught part, or the part
     is not where it was taught, and the loop stops (``out_of_range``) without moving;
     settle_frames: a full look whose first frame reads a step within ``settle_mm`` and
-    ``settle_deg`` (the loop is settling at the taught pose) reads this many frames and takes
-    their mean step (1: every look reads one frame, the paper's loop): near the pose the
-    readings' frame-to-frame noise is as large as what is left to correct, in a dim frame
-    more so;
+    ``settle_deg`` (the loop is settling at the taught pose) reads this many frames (1: every
+    look reads one frame, the paper's loop): near the pose the readings' frame-to-frame noise
+    is as large as what is left to correct, in a dim frame more so;
+    settle_average: how those frames make one step: ``frames``, the step read from their
+    mean frame (the camera's noise averaged out before the part's edge is read: in a dim
+    frame's shadows some noisy pixels join the part's blob, which moves its centre one way
+    in every frame, so that the mean of the frames' steps keeps it); ``steps``, the mean of
+    their steps. Either way a frame without the part or reading outside that window is left
+    out;
     turn_check_deg / turn_check_share: after a full loop that turned by t on a reading of
     r, the next full look should read about r - t (zero, unless the turn was cut to the
     arm's ``max_step_deg``); a reading further off than the larger of ``turn_check_deg`` and
@@ -113,6 +119,7 @@ class LoopConfig:
     settle_frames: int = field(default=3, metadata={"min": 1, "max": 32})
     settle_mm: float = field(default=0.5, metadata={"min": 0.0})
     settle_deg: float = field(default=2.0, metadata={"min": 0.0})
+    settle_average: Literal["frames", "steps"] = "frames"
     turn_check_deg: float | None = field(default=10.0, metadata={"min": 0.0})
     turn_check_share: float = field(default=0.4, metadata={"min": 0.0, "max": 1.0})
     hidden_check_share: float | None = field(default=0.1, metadata={"min": 0.0, "max": 1.0})
@@ -294,9 +301,8 @@ class PositioningLoop:
                                       f"deg, contradicts the last loop's (about "
                                       f"{expected[0]:.1f} deg expected): the rotation "
                                       "reading does not follow the arm")
-                if cfg.settle_frames > 1 and math.hypot(read.dx_mm, read.dy_mm) <= \
-                        cfg.settle_mm and abs(read.dphi_deg) <= cfg.settle_deg:
-                    read = self._settle(estimator, read, record)
+                if cfg.settle_frames > 1 and self._settling(read):
+                    read = self._settle(estimator, read, record, frame.image)
                 step = read if cfg.turn_in_commands else _turn_within_limits(read, self.arm)
             record.commanded = step
             shift = math.hypot(step.dx_mm, step.dy_mm)
@@ -388,28 +394,50 @@ class PositioningLoop:
         return share is not None and tr.seen_share is not None \
             and read_mm <= self.config.r_fine_mm and tr.seen_share < 1.0 - share
 
-    def _settle(self, estimator: Estimator, first: ToolStep,
-                record: IterationRecord) -> ToolStep:
-        """The mean step of ``first`` and ``settle_frames - 1`` more frames' full estimates.
-        A frame where the part is not found, or whose step is outside the settle window
-        (``settle_mm``, ``settle_deg``; a misreading), is left out of the mean. The record
-        keeps every frame's step (``settle``, the first one first; null where not found)."""
+    def _settle(self, estimator: Estimator, first: ToolStep, record: IterationRecord,
+                image: np.ndarray) -> ToolStep:
+        """One step from ``first`` (read on ``image``) and ``settle_frames - 1`` more frames
+        (``settle_average``). A frame where the part is not found, or whose step is outside
+        the settle window (``settle_mm``, ``settle_deg``; a misreading), is left out. The
+        record keeps every frame's step (``settle``, the first one first; null where not
+        found) and the mean frame's (``settle_mean_frame``). Where the mean frame reads no
+        part or a step outside the window, the frames' mean step is taken."""
         cfg = self.config
-        steps, read = [first], [[first.dx_mm, first.dy_mm, first.dphi_deg]]
+        steps, images = [first], [image]
+        read = [[first.dx_mm, first.dy_mm, first.dphi_deg]]
         for _ in range(cfg.settle_frames - 1):
-            tr = estimator.estimate_translation(self.camera.grab().image)
-            if tr.status != "ok":
+            image = self.camera.grab().image
+            step = self._within_settle(estimator, image)
+            if step is None:
                 read.append(None)
                 continue
-            step = corrective_step(tr, estimator.estimate_rotation(tr))
             read.append([step.dx_mm, step.dy_mm, step.dphi_deg])
-            if math.hypot(step.dx_mm, step.dy_mm) <= cfg.settle_mm and \
-                    abs(step.dphi_deg) <= cfg.settle_deg:
+            if self._settling(step):
                 steps.append(step)
+                images.append(image)
         record.estimates["settle"] = read
+        if cfg.settle_average == "frames" and len(images) > 1:
+            step = self._within_settle(estimator, mean_frame(images))
+            record.estimates["settle_mean_frame"] = None if step is None else \
+                [step.dx_mm, step.dy_mm, step.dphi_deg]
+            if step is not None and self._settling(step):
+                return ToolStep(step.dx_mm, step.dy_mm, 0.0, step.dphi_deg)
         n = len(steps)
         return ToolStep(sum(s.dx_mm for s in steps) / n, sum(s.dy_mm for s in steps) / n, 0.0,
                         sum(s.dphi_deg for s in steps) / n)
+
+    @staticmethod
+    def _within_settle(estimator: Estimator, image: np.ndarray) -> ToolStep | None:
+        """The full step read on ``image``, None where the part is not found."""
+        tr = estimator.estimate_translation(image)
+        if tr.status != "ok":
+            return None
+        return corrective_step(tr, estimator.estimate_rotation(tr))
+
+    def _settling(self, step: ToolStep) -> bool:
+        cfg = self.config
+        return math.hypot(step.dx_mm, step.dy_mm) <= cfg.settle_mm and \
+            abs(step.dphi_deg) <= cfg.settle_deg
 
     def _write(self, record: IterationRecord, kind: LoopKind, clock: tuple[float, ...],
                image) -> None:
@@ -433,3 +461,12 @@ class PositioningLoop:
         if self.recorder is not None and self._look is not None:
             frame, estimate, estimator, error_at_look = self._look
             self.recorder.look(record, frame, estimate, estimator, error_at_look)
+
+
+def mean_frame(images: list[np.ndarray]) -> np.ndarray:
+    """The pixel-wise mean of frames of one size (uint8, rounded): the arm stands still, so
+    only the camera's noise differs between them."""
+    total = np.zeros(images[0].shape, np.uint32)
+    for image in images:
+        total += image
+    return ((total + len(images) // 2) // len(images)).astype(np.uint8)

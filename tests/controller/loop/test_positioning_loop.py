@@ -1,13 +1,15 @@
 """Loop logic of the positioning controller against a fake arm and a scripted estimator."""
 
 import dataclasses
+import itertools
 import json
 import math
 
+import numpy as np
 import pytest
 
 from controller.loop.iteration_log import IterationLog, read_log
-from controller.loop.positioning import LoopConfig, PositioningLoop
+from controller.loop.positioning import LoopConfig, PositioningLoop, mean_frame
 from controller.systems.estimator import TranslationEstimate
 from drivers.core.errors import MotionRejectedError
 from drivers.core.pose import ToolStep, wrap_deg
@@ -322,10 +324,10 @@ def test_settling_looks_average_their_frames(tmp_path):
     by the scatter and never meets the thresholds; two frames a look cancel it."""
     errors = [(0.08, -0.08, 0.4), (-0.08, 0.08, -0.4)]
     start = ToolStep(0.3, -0.2, 0.0, 1.0)
-    arm, cam, cfg = make(start, max_loops=4.0)
+    arm, cam, cfg = make(start, max_loops=4.0, settle_frames=1)
     alone = PositioningLoop(arm, cam, cfg).run(NoisyEstimator(arm, errors))
     assert alone.outcome == "budget"
-    arm, cam, cfg = make(start, max_loops=4.0, settle_frames=2)
+    arm, cam, cfg = make(start, max_loops=4.0, settle_frames=2, settle_average="steps")
     est = NoisyEstimator(arm, errors)
     with IterationLog(tmp_path / "it.jsonl") as log:
         settled = PositioningLoop(arm, cam, cfg, log, lambda: truth_error(arm)).run(est)
@@ -338,7 +340,8 @@ def test_settling_looks_average_their_frames(tmp_path):
 
 def test_settling_leaves_out_frames_without_the_part_or_off_the_window(tmp_path):
     errors = [(0.0, 0.0, 0.0), None, (3.0, 0.0, 0.0), (0.0, 0.0, 0.0)]
-    arm, cam, cfg = make(ToolStep(0.2, 0.1, 0.0, 0.5), settle_frames=4)
+    arm, cam, cfg = make(ToolStep(0.2, 0.1, 0.0, 0.5), settle_frames=4,
+                         settle_average="steps")
     with IterationLog(tmp_path / "it.jsonl") as log:
         result = PositioningLoop(arm, cam, cfg, log, lambda: truth_error(arm)).run(
             NoisyEstimator(arm, errors))
@@ -352,7 +355,8 @@ def test_settling_leaves_out_frames_without_the_part_or_off_the_window(tmp_path)
 
 
 def test_only_settling_looks_read_more_frames(tmp_path):
-    arm, cam, cfg = make(ToolStep(3.0, 0.0, 0.0, 10.0), settle_frames=4)
+    arm, cam, cfg = make(ToolStep(3.0, 0.0, 0.0, 10.0), settle_frames=4,
+                         settle_average="steps")
     est = NoisyEstimator(arm, [(0.0, 0.0, 0.0)], gain=0.9)
     with IterationLog(tmp_path / "it.jsonl") as log:
         PositioningLoop(arm, cam, cfg, log).run(est)
@@ -360,6 +364,67 @@ def test_only_settling_looks_read_more_frames(tmp_path):
     # 3 mm / 10 deg, then 0.3 mm / 1 deg: one frame, then four; then the check settles too
     assert "settle" not in records[0] and len(records[1]["settle"]) == 4
     assert est.frames == 1 + 4 * (len(records) - 1)
+
+
+class SpeckleEstimator(TruthEstimator):
+    """Reads the true step, 0.2 mm too far in x in a frame whose noise lifts its first pixel
+    above 105 (noise pixels that join the part's blob: a bias one way, as in a dim frame's
+    shadows), and no part in a frame whose first pixel is 50."""
+
+    def estimate_translation(self, image):
+        if image[0, 0, 0] == 50:
+            return TranslationEstimate("no_object", reason="scripted miss")
+        t = super().estimate_translation(image)
+        return dataclasses.replace(t, dx_mm=t.dx_mm + (0.2 if image[0, 0, 0] > 105 else 0.0))
+
+
+def _cycling_camera(levels):
+    frames = itertools.cycle([np.full((144, 192, 3), v, np.uint8) for v in levels])
+    cam = FakeCamera(lambda: next(frames))
+    cam.connect()
+    return cam
+
+
+@pytest.mark.parametrize("average", ["frames", "steps"])
+def test_a_settling_look_reads_its_mean_frame(average, tmp_path):
+    """Frames at 110, 90 and 100 (noise): one in three reads 0.2 mm off; their mean frame
+    (100) reads the truth, the mean of their steps keeps a third of the bias."""
+    arm, _, cfg = make(ToolStep(0.2, 0.1, 0.0, 0.5), max_loops=4.0, settle_frames=3,
+                       settle_average=average)
+    cam = _cycling_camera([100, 110, 90])
+    with IterationLog(tmp_path / "it.jsonl") as log:
+        result = PositioningLoop(arm, cam, cfg, log, lambda: truth_error(arm)).run(
+            SpeckleEstimator(arm))
+    first = read_log(tmp_path / "it.jsonl")[0]
+    assert [s[0] - first["settle"][0][0] for s in first["settle"]] == \
+        pytest.approx([0.0, 0.2, 0.0])
+    if average == "frames":
+        assert result.outcome == "converged"
+        assert first["settle_mean_frame"] == pytest.approx(first["settle"][0])
+        assert max(abs(e) for e in result.states[-1].error) < 1e-6
+    else:
+        assert "settle_mean_frame" not in first
+        assert first["commanded"]["dx_mm"] == pytest.approx(first["settle"][0][0] + 0.2 / 3)
+
+
+def test_a_mean_frame_without_the_part_falls_back_to_the_mean_step(tmp_path):
+    # frames at 40 and 60 each show the part; their mean frame (50) is scripted to show none
+    arm, _, cfg = make(ToolStep(0.2, 0.1, 0.0, 0.5), settle_frames=2)
+    cam = _cycling_camera([40, 60])
+    with IterationLog(tmp_path / "it.jsonl") as log:
+        result = PositioningLoop(arm, cam, cfg, log, lambda: truth_error(arm)).run(
+            SpeckleEstimator(arm))
+    first = read_log(tmp_path / "it.jsonl")[0]
+    assert first["settle_mean_frame"] is None and None not in first["settle"]
+    assert [first["commanded"][k] for k in ("dx_mm", "dy_mm", "dphi_deg")] == \
+        pytest.approx(first["settle"][0], abs=1e-9)
+    assert result.outcome == "converged"
+
+
+def test_mean_frame_rounds_the_pixelwise_mean():
+    frames = [np.full((2, 2, 3), v, np.uint8) for v in (0, 255, 255)]
+    assert np.all(mean_frame(frames) == 170) and mean_frame(frames).dtype == np.uint8
+    assert np.all(mean_frame([np.full((2, 2, 3), v, np.uint8) for v in (1, 2)]) == 2)
 
 
 class BlindNearEstimator(TruthEstimator):
