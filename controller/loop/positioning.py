@@ -407,7 +407,7 @@ class PositioningLoop:
         read = [[first.dx_mm, first.dy_mm, first.dphi_deg]]
         for _ in range(cfg.settle_frames - 1):
             image = self.camera.grab().image
-            step = self._within_settle(estimator, image)
+            step = self._full_step(estimator, image)
             if step is None:
                 read.append(None)
                 continue
@@ -417,7 +417,7 @@ class PositioningLoop:
                 images.append(image)
         record.estimates["settle"] = read
         if cfg.settle_average == "frames" and len(images) > 1:
-            step = self._within_settle(estimator, mean_frame(images))
+            step = self._full_step(estimator, mean_frame(images))
             record.estimates["settle_mean_frame"] = None if step is None else \
                 [step.dx_mm, step.dy_mm, step.dphi_deg]
             if step is not None and self._settling(step):
@@ -427,7 +427,7 @@ class PositioningLoop:
                         sum(s.dphi_deg for s in steps) / n)
 
     @staticmethod
-    def _within_settle(estimator: Estimator, image: np.ndarray) -> ToolStep | None:
+    def _full_step(estimator: Estimator, image: np.ndarray) -> ToolStep | None:
         """The full step read on ``image``, None where the part is not found."""
         tr = estimator.estimate_translation(image)
         if tr.status != "ok":
