@@ -222,7 +222,8 @@ def register(subparsers) -> None:
         description="Example: finepos rezero\n\nAfter the light changed (a lamp moved, the "
                     "room dimmed): with the part where it was taught, move to the taught "
                     "pose, take --frames frames and shift the translation nets to read zero "
-                    "there (the Gabor model in the part's state folder, rewritten "
+                    "there, and turn NN2 back where it reads 1 deg or more there (the Gabor "
+                    "model in the part's state folder, rewritten "
                     "atomically; no new acquisition; --system align: take the servo's "
                     "template again there). A reading over 1 mm or 3 deg there is refused: "
                     "the part is not where it was taught, or the camera moved.")
