@@ -44,8 +44,8 @@ NEAR_FIT_DEG = 25.0
 WINDOW_DEG = 15.0
 # An axis reading further than this from NN2's is not taken (the silhouette is not the
 # taught one). Near the taught pose in poor light NN2 reads up to 21 deg off where the axis
-# reads within 3 deg (the screw, 1063 looks): a tighter limit dropped the right reading there
-# and the loop took NN2's wrong one.
+# reads within 3 deg (the screw, 200 poor-light trials): a tighter limit dropped the right
+# reading there and the loop took NN2's wrong one.
 AGREE_DEG = 30.0
 # The whole-circle map reads only if it fits its samples this well; otherwise NN2 reads away
 # from the taught pose and the near map near it. Screw 0.72 deg; the ledge 1.10 deg: the bar
