@@ -7,6 +7,7 @@ state folder (``controller.teach.state_folder``).
 
 from __future__ import annotations
 
+from calibration_free.rezero import MAX_SHIFT_MM, MAX_TURN_DEG, NN2_MIN_DEG
 from controller.commands.common import (
     TAUGHT_PART_HELP,
     add_command,
@@ -222,11 +223,12 @@ def register(subparsers) -> None:
         description="Example: finepos rezero\n\nAfter the light changed (a lamp moved, the "
                     "room dimmed): with the part where it was taught, move to the taught "
                     "pose, take --frames frames and shift the translation nets to read zero "
-                    "there, and turn NN2 back where it reads 1 deg or more there (the Gabor "
-                    "model in the part's state folder, rewritten "
+                    f"there, and turn NN2 back where it reads {NN2_MIN_DEG:g} deg or more "
+                    "there (the Gabor model in the part's state folder, rewritten "
                     "atomically; no new acquisition; --system align: take the servo's "
-                    "template again there). A reading over 1 mm or 3 deg there is refused: "
-                    "the part is not where it was taught, or the camera moved.")
+                    f"template again there). A reading over {MAX_SHIFT_MM:g} mm or "
+                    f"{MAX_TURN_DEG:g} deg there is refused: the part is not where it was "
+                    "taught, or the camera moved.")
     add_config_option(p)
     add_device_options(p)
     add_part_option(p, TAUGHT_PART_HELP)
