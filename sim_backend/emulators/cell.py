@@ -35,6 +35,12 @@ from sim_backend.emulators.val.sim_arm import SIM_KINEMATICS
 logger = logging.getLogger(__name__)
 
 DEFAULT_FPS = 30.0
+# What the camera driver waits past a frame's request, beyond the stream's own frame period,
+# exposure and latency: the emulator renders, encodes and the driver decodes on the same
+# machine as the loop. With the driver's default 0.05 s on a loaded two-core machine, a look
+# right after a 14 mm move read the frame from before it (the loop stepped twice as far and
+# the grasp met the part 3 mm off its centre).
+STREAM_MARGIN_S = 0.15
 
 
 class SerialisedCell:
@@ -132,8 +138,21 @@ class CellEmulators(Lifecycle):
         if self.ati_url is not None:
             sections["wrench"] = {"type": "ati", "port": self.ati_url}
         if self.stream_url is not None:
-            sections["camera"] = {"type": "opencv", "source": self.stream_url}
+            sections["camera"] = {"type": "opencv", "source": self.stream_url,
+                                  "settle_s": round(self.stream_settle_s(), 3)}
         return sections
+
+    def stream_settle_s(self) -> float:
+        """The camera driver's ``settle_s`` for this stream: after a move, the frame being
+        rendered may have started before it ended (one frame period), and a frame is exposed
+        and delivered ``latency_frames`` periods later (realistic timing), plus
+        STREAM_MARGIN_S for rendering, encoding and decoding on this machine."""
+        period_s = 1.0 / self._fps
+        settle_s = period_s + STREAM_MARGIN_S
+        if self.timing_config is not None:
+            cam = self.timing_config.camera
+            settle_s += cam.exposure_s + cam.latency_frames * period_s
+        return settle_s
 
     def start(self) -> Self:
         """Connect the simulated devices and start every emulator asked for."""

@@ -13,7 +13,7 @@ from drivers.camera import OpenCvCamera, OpenCvCameraConfig
 from drivers.core.pose import ToolStep
 from drivers.safety import SafetyLimits
 from drivers.val import ValArm, ValConfig
-from sim_backend.emulators.cell import CellEmulators, SerialisedCell
+from sim_backend.emulators.cell import DEFAULT_FPS, STREAM_MARGIN_S, CellEmulators, SerialisedCell
 
 
 class Recorder:
@@ -58,6 +58,8 @@ def test_real_drivers_see_one_cell():
         sections = emulators.device_sections()
         assert sections["arm"]["port"] == emulators.val_url
         assert "gripper_closed_width_mm" not in sections["arm"]  # the driver's own, as on VAL
+        # a frame asked for after a move: one rendered once the move had ended
+        assert sections["camera"]["settle_s"] >= 1.0 / DEFAULT_FPS + STREAM_MARGIN_S - 1e-3
         with ValArm(ValConfig(port=emulators.val_url), SafetyLimits()) as arm, \
                 AtiWrenchSensor(AtiConfig(port=emulators.ati_url)) as sensor, \
                 OpenCvCamera(OpenCvCameraConfig(source=emulators.stream_url)) as camera:
