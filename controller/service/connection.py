@@ -190,6 +190,11 @@ class Connection:
                     self._send(event_line(event))
                 elif self._client_left() and not self._closing.is_set():
                     return  # (when closing, the server shut our reading side: not the client)
+            # what was published before the service stopped (its "stopping" state among it),
+            # then the end; a client that does not read is cut off by the server's close
+            subscription.close()
+            while (event := subscription.get(0.0)) is not None:
+                self._send(event_line(event))
             self._send(event_line({"event": "end", "reason": "service stopping"}))
         finally:
             subscription.close()

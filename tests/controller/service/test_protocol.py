@@ -92,3 +92,39 @@ def test_line_reader_skips_an_oversized_line_and_carries_on():
     assert reader.read() is None  # an unterminated last line is dropped
     sender.join()
     server.close()
+
+
+def test_a_stream_sends_what_was_published_before_the_service_stopped_then_its_end():
+    """The service publishes its "stopping" state and closes at once: a stream that has
+    not yet read it from its queue still sends it, and the events before it, then the end."""
+    from controller.service.connection import Connection
+    from controller.service.events import EventHub
+
+    hub, closing = EventHub(), threading.Event()
+    published = [{"event": "iteration", "record": {"iteration": 7}},
+                 {"event": "state", "state": "stopping"}]
+
+    class StoppingService:
+        def handle(self, request):
+            raise AssertionError("only the stream is asked for")
+
+        def subscribe(self):
+            subscription = hub.subscribe()
+            for event in published:
+                hub.publish(event)
+            closing.set()  # the service stops before the stream reads its queue
+            return subscription
+
+    ours, theirs = socket.socketpair()
+    with ours, theirs:
+        connection = Connection(ours, "test", StoppingService(), 4096, closing)
+        thread = threading.Thread(target=connection.serve, daemon=True)
+        thread.start()
+        theirs.sendall(b'{"cmd": "stream", "id": 1}\n')
+        thread.join(5.0)
+        assert not thread.is_alive()
+        ours.shutdown(socket.SHUT_WR)
+        lines = theirs.makefile("rb").read().decode().splitlines()
+    answer, *events = (json.loads(line) for line in lines)
+    assert answer["ok"] is True and answer["result"] == {"streaming": True}
+    assert events == [*published, {"event": "end", "reason": "service stopping"}]
