@@ -55,7 +55,8 @@ Commands (arguments, types, ranges and defaults in ``commands.COMMANDS``):
   ``{"event": "state", "state": ..., "previous": ..., "reason": ..., "time": ...}``,
   ``{"event": "dropped", "count": N}`` (the client read too slowly; the log file has them all),
   ``{"event": "halt", "ok": ..., "error": ...}`` (a halt that outlived its ``abort``),
-  ``{"event": "end", ...}`` when the service stops;
+  ``{"event": "end", ...}`` when the service stops, after every event published before it
+  (a client that does not read meanwhile is cut off when the service closes);
 - ``auth`` (``token``): the first request on a TCP connection.
 
 Security: the socket is created with mode 0660 and group ``service.socket_group``; each peer's
