@@ -198,7 +198,7 @@ class SimCamera(Camera):
         if clock.virtual:
             now = clock.now()
             wait = (-now) % period
-            clock.advance(wait + cam.exposure_s + cam.latency_frames * period)
+            clock.advance(wait + cam.delivery_s)
             return Frame(self.cell.render(), clock.now())
         frame = Frame(self._expose(cam.exposure_s), clock.now())
         self._delivered.append(frame)

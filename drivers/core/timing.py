@@ -60,6 +60,12 @@ class CameraTiming:
     exposure_s: float = field(default=0.01, metadata={"min": 0.0, "max": 1.0})
     latency_frames: int = field(default=1, metadata={"min": 0, "max": 10})
 
+    @property
+    def delivery_s(self) -> float:
+        """From the start of a frame's exposure to its delivery: the exposure, then
+        ``latency_frames`` frame periods."""
+        return self.exposure_s + self.latency_frames / self.frame_rate_hz
+
     def __post_init__(self) -> None:
         if self.exposure_s > 1.0 / self.frame_rate_hz:
             raise ValueError(f"exposure_s: {self.exposure_s:g} s is longer than one frame "

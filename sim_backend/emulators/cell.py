@@ -147,11 +147,9 @@ class CellEmulators(Lifecycle):
         rendered may have started before it ended (one frame period), and a frame is exposed
         and delivered ``latency_frames`` periods later (realistic timing), plus
         STREAM_MARGIN_S for rendering, encoding and decoding on this machine."""
-        period_s = 1.0 / self._fps
-        settle_s = period_s + STREAM_MARGIN_S
+        settle_s = 1.0 / self._fps + STREAM_MARGIN_S
         if self.timing_config is not None:
-            cam = self.timing_config.camera
-            settle_s += cam.exposure_s + cam.latency_frames * period_s
+            settle_s += self.timing_config.camera.delivery_s
         return settle_s
 
     def start(self) -> Self:
