@@ -62,13 +62,13 @@ def test_real_drivers_see_one_cell():
         assert sections["camera"]["settle_s"] >= 1.0 / DEFAULT_FPS + STREAM_MARGIN_S - 1e-3
         with ValArm(ValConfig(port=emulators.val_url), SafetyLimits()) as arm, \
                 AtiWrenchSensor(AtiConfig(port=emulators.ati_url)) as sensor, \
-                OpenCvCamera(OpenCvCameraConfig(source=emulators.stream_url)) as camera:
+                OpenCvCamera(OpenCvCameraConfig(source=emulators.stream_url,
+                                                settle_s=sections["camera"]["settle_s"])) as camera:
             arm.move_tool(ToolStep(6.0, -4.0, 0.0, 10.0))
             target = cell.nominal_grasp_pose().moved_in_tool_frame(ToolStep(6.0, -4.0, 0.0, 10.0))
             reached = cell.arm_pose()
             assert np.allclose(reached.position_mm, target.position_mm, atol=0.02)
-            camera.grab()  # may have been rendered just before the move (stream latency)
-            frame = camera.grab()  # rendered at least one frame period later: after the move
+            frame = camera.grab()  # waits the stream's settle_s: rendered after the move
             difference = np.abs(frame.image.astype(float) - cell.render(noisy=False)).mean()
             assert difference < 4.0  # JPEG and pixel noise only
             expected_fz_n = cell.wrench(noisy=False)[2]  # the gripper's weight, unbiased
