@@ -103,6 +103,8 @@ def read_model(path: str | Path, kind: str, version: int, older: tuple[int, ...]
     if len(data) < 8:
         raise BundleError(f"{path}: not a {kind} model file (only {len(data)} bytes)")
     header_len = int.from_bytes(data[:8], "little")
+    if data[8:9] != b"{":  # a safetensors header is a JSON object right after its length
+        raise BundleError(f"{path}: not a {kind} model file (no model header at its start)")
     if header_len > len(data) - 8:
         raise BundleError(f"{path}: truncated {kind} model file (header claims {header_len} "
                           f"bytes, {len(data) - 8} present)")

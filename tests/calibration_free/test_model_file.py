@@ -37,6 +37,12 @@ def test_refusals(good, tmp_path):
             path.write_bytes(content)
         with pytest.raises(BundleError):
             read_model(path, "pca", 1)
+    text = tmp_path / "notes.txt"
+    text.write_bytes(b"garbage, not a model\n")
+    with pytest.raises(BundleError, match="not a pca model file .no model header"):
+        read_model(text, "pca", 1)
+    with pytest.raises(BundleError, match="truncated"):
+        read_model(tmp_path / "truncated", "pca", 1)
     with pytest.raises(BundleError, match="'pca' model, not a 'hough'"):
         read_model(good, "hough", 1)
     with pytest.raises(BundleError, match="version 1 is not supported"):

@@ -7,6 +7,7 @@ from __future__ import annotations
 import fcntl
 import os
 import threading
+from pathlib import Path
 
 import pytest
 
@@ -42,9 +43,27 @@ def test_a_failed_write_leaves_the_old_file_and_no_temp_file(tmp_path, monkeypat
         raise OSError(28, "No space left on device")
 
     monkeypatch.setattr(os, "replace", failing_replace)
-    with pytest.raises(OSError):
+    with pytest.raises(OSError) as failed:
         atomic_write_bytes(target, b"new")
     assert target.read_bytes() == b"old" and not list(tmp_path.glob(".*.tmp"))
+    # the error names the file asked for, not the temporary one
+    assert failed.value.errno == 28 and failed.value.filename == str(target)
+
+
+def test_a_folder_that_cannot_hold_the_file_is_named(tmp_path):
+    folder = tmp_path / "ro"
+    folder.mkdir()
+    folder.chmod(0o500)
+    try:
+        if os.access(folder, os.W_OK):  # root writes anywhere: a missing /proc entry instead
+            target = Path("/proc/finepos-report.json")
+        else:
+            target = folder / "report.json"
+        with pytest.raises(OSError) as failed:
+            atomic_write_bytes(target, b"x")
+        assert failed.value.filename == str(target) and failed.value.strerror
+    finally:
+        folder.chmod(0o700)
 
 
 def test_a_fifo_is_refused_without_blocking(tmp_path):
