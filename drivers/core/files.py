@@ -116,16 +116,12 @@ def atomic_write_bytes(path: str | Path, data: bytes) -> None:
             f.flush()
             os.fsync(f.fileno())
         os.replace(tmp, path)
-    except OSError as exc:
+    except BaseException as exc:
         with contextlib.suppress(FileNotFoundError):
             os.unlink(tmp)
-        if exc.errno is None:
-            raise
-        # the destination is what the caller named, not the temporary file beside it
-        raise OSError(exc.errno, exc.strerror, str(path)) from exc
-    except BaseException:
-        with contextlib.suppress(FileNotFoundError):
-            os.unlink(tmp)
+        if isinstance(exc, OSError) and exc.errno is not None:
+            # the destination is what the caller named, not the temporary file beside it
+            raise OSError(exc.errno, exc.strerror, str(path)) from exc
         raise
     try:
         dir_fd = os.open(path.parent, os.O_RDONLY)
