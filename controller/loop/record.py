@@ -23,8 +23,10 @@ class IterationRecord:
         status: ``ok``, ``no_object`` or ``ambiguous``.
         estimates: the estimators' values for the log (network outputs, timings...).
         loop_kind: ``half`` or ``full`` (a move was made), ``around`` (the look-around's
-            turn, ``LoopConfig.look_around_deg``), ``check`` (a full look found the
-            pose reached: no move), ``stop`` (no move: lost part, budget spent, rejected step).
+            turn, ``LoopConfig.look_around_deg``), ``check`` (a full look found its
+            step below the convergence thresholds: the loop ends, after moving by that step
+            where ``LoopConfig.final_step``), ``stop`` (no move: lost part, budget spent,
+            rejected step).
         loops: cumulative loop count after this look (half = 0.5, full = 1).
         commanded: the step the loop asked for (None when it computed none).
         executed: the step the arm was sent after the safety layer (None without a move).

@@ -521,3 +521,39 @@ def test_the_hidden_check_also_ends_a_spent_budget_near_the_pose_and_can_be_off(
     arm, cam, cfg = make(ToolStep(1.0, 0.0, 0.0, 0.0), hidden_check_share=None)
     assert PositioningLoop(arm, cam, cfg).run(
         HiddenPartEstimator(arm, 0.5)).outcome == "converged"
+
+
+@pytest.mark.parametrize("final_step", [True, False])
+def test_the_converged_look_makes_its_step_unless_told_not_to(final_step, tmp_path):
+    # gain 0.5 reads half of what is left: the look that finds the step below the thresholds
+    # still sees as much again to go
+    arm, cam, cfg = make(ToolStep(0.3, -0.2, 0.0, 2.0), converge_mm=0.05, converge_deg=0.3,
+                         settle_frames=1, final_step=final_step)
+    with IterationLog(tmp_path / "it.jsonl") as log:
+        result = PositioningLoop(arm, cam, cfg, log, lambda: truth_error(arm)).run(
+            TruthEstimator(arm, gain=0.5))
+    records = read_log(tmp_path / "it.jsonl")
+    last = records[-1]
+    assert result.outcome == "converged" and last["loop_kind"] == "check"
+    before = records[-2]["error"]
+    if final_step:
+        assert last["executed"] == last["commanded"] and last["pose_after"] is not None
+        assert result.loops == records[-2]["loops"] + 1.0 == result.states[-1].loops
+        assert "made" in result.reason
+        # the step read half of the error, and made it halves it
+        after = result.states[-1].error
+        assert abs(after[2]) == pytest.approx(abs(before["phi_deg"]) / 2, abs=1e-6)
+        assert math.hypot(*after[:2]) == pytest.approx(
+            math.hypot(before["x_mm"], before["y_mm"]) / 2, abs=1e-6)
+    else:
+        assert last["executed"] is None and len(arm.moves) == len(records) - 1
+        assert result.loops == records[-2]["loops"]
+        assert result.states[-1].error == pytest.approx(tuple(before.values()))
+
+
+def test_the_converged_look_makes_no_step_beyond_the_budget():
+    arm, cam, cfg = make(ToolStep(0.3, -0.2, 0.0, 2.0), settle_frames=1, max_loops=2.0)
+    result = PositioningLoop(arm, cam, cfg).run(TruthEstimator(arm, gain=0.5))
+    moves = len(arm.moves)
+    assert result.outcome == "converged" and result.loops == 2.0
+    assert moves == len(result.states) - 1 and "made" not in result.reason
