@@ -48,6 +48,10 @@ Outcome = Literal["converged", "budget", "no_object", "ambiguous", "out_of_range
 # the last accepted move put it.
 STOPPED: tuple[Outcome, ...] = ("no_object", "ambiguous", "out_of_range", "inconsistent",
                                 "occluded", "rejected")
+# A converged look's step smaller than both is not made (``LoopConfig.final_step``): finer
+# than the arm resolves (VAL takes a pose to 0.01 mm and 0.001 deg).
+FINAL_STEP_MIN_MM = 1e-3
+FINAL_STEP_MIN_DEG = 1e-3
 
 
 class LookRecorder(Protocol):
@@ -59,11 +63,6 @@ class LookRecorder(Protocol):
         """One look: its complete record, the frame, the translation estimate (whose percept
         holds the localisation), the estimator and the true error when the frame was taken."""
         ...
-
-# A converged look's step smaller than both is not made (``LoopConfig.final_step``): finer
-# than the arm resolves (VAL takes a pose to 0.01 mm and 0.001 deg).
-FINAL_STEP_MIN_MM = 1e-3
-FINAL_STEP_MIN_DEG = 1e-3
 
 
 @dataclass(frozen=True)
