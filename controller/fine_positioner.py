@@ -21,7 +21,7 @@ from calibration_free.dataset import Dataset
 from calibration_free.rezero import rezero
 from controller.loop.grasp import GraspResult, guarded_grasp
 from controller.loop.iteration_log import IterationLog
-from controller.loop.positioning import PositioningLoop, PositioningResult
+from controller.loop.positioning import LoopState, PositioningLoop, PositioningResult
 from controller.systems.base import TrainedModel
 from controller.systems.registry import SYSTEMS
 from controller.teach.acquisition import acquire, grid_for, random_set, transfer
@@ -62,6 +62,8 @@ class FinePositioner:
         self.state_dir = Path(state_dir or config.controller.paths.state_dir)
         self._loop: PositioningLoop | None = None
         self._model: TrainedModel | None = None
+        # a run whose converged step waits for the grasp, and the pose the loop left the arm at
+        self._carried: tuple[PositioningResult, Pose] | None = None
 
     # -- files ----------------------------------------------------------------------------
     @property
@@ -248,16 +250,22 @@ class FinePositioner:
         self._model = model
 
     # -- positioning and grasp --------------------------------------------------------------
-    def position(self, max_loops: float | None = None) -> PositioningResult:
+    def position(self, max_loops: float | None = None,
+                 then_grasp: bool = False) -> PositioningResult:
         """Run the positioning loop from wherever the arm is (loading the stored model first
         if none is in use).
 
         Args:
             max_loops: the loop budget (default ``controller.loop.max_loops``).
+            then_grasp: ``grasp`` is called next, from where the loop leaves the arm: the
+                converged look's step is left for the grasp's first descent move
+                (``controller.grasp.carry_final_step``); the result's ``carried`` holds it
+                until then.
 
         Returns:
             The outcome, loops spent and the state after every move (``PositioningResult``).
         """
+        self._carried = None
         if self._model is None:
             self.load_model()
         estimator = SYSTEMS[self._model.system].estimator(self._model)
@@ -267,18 +275,36 @@ class FinePositioner:
                                      self.config.controller.loop, self.log, truth,
                                      recorder=self.recorder,
                                      reach_mm=nn1_grid.a_mm * math.sqrt(2.0))
+        carry = then_grasp and self.config.controller.grasp.carry_final_step
         try:
-            return self._loop.run(estimator, max_loops)
+            result = self._loop.run(estimator, max_loops, carry_final_step=carry)
         finally:
             self._loop = None
+        if result.carried is not None:
+            self._carried = (result, self.devices.arm.pose(fresh=False))
+        return result
 
     def grasp(self) -> GraspResult:
         """The force-guarded grasp from the pre-grasp pose (``controller.loop.grasp``): open,
         descend the taught depth under the guards, close, verify, lift.
 
+        Where the last ``position(then_grasp=True)`` left its converged step to the grasp and the
+        arm is still where that loop left it, the first descent move makes the step; the run's
+        result then gets that full loop and the state after it, as if the loop had made it.
+
         Returns:
             Whether the part is held, the guard that tripped (if any) and the readings.
         """
+        pending, self._carried = self._carried, None
+        carried = on_carried = None
+        if pending is not None:
+            run, left_at = pending
+            if _same_pose(self.devices.arm.pose(fresh=False), left_at):
+                carried = run.carried
+                on_carried = self._carried_step_made(run)
+            else:
+                logger.warning("the arm moved after positioning run %s: its converged step is "
+                               "not carried to the grasp", run.run_id)
         state = self.state()
         recorder = self.recorder
         clock = getattr(self.devices, "clock", None)  # cell seconds, for the recording
@@ -286,13 +312,34 @@ class FinePositioner:
             recorder.recording_sensor(self.devices.wrench, clock)
         weight_n = parts.part(state.object_kind).mass_g * 9.81e-3  # the taught part's
         result = guarded_grasp(self.devices.arm, sensor, state.grasp_depth_mm,
-                               state.object_width_mm, self.config.controller.grasp, weight_n)
+                               state.object_width_mm, self.config.controller.grasp, weight_n,
+                               carried, on_carried)
         if recorder is not None:
             recorder.grasp_event(result, clock() if clock is not None else None)
         return result
+
+    def _carried_step_made(self, run: PositioningResult):
+        """What the grasp calls once its first move has made ``run``'s converged step: the
+        run counts it as the full loop the loop would have made, with the state after it."""
+        truth = self.devices.ground_truth if self.devices.cell is not None else None
+
+        def made() -> None:
+            run.loops += 1.0
+            run.iterations += 1
+            run.states.append(LoopState(run.loops, tuple(truth()) if truth else None))
+            run.reason = run.reason.replace(", carried to the grasp",
+                                            ", and made by the grasp's first move")
+        return made
 
     def abort(self) -> None:
         """Stop a running loop before its next move and halt the arm."""
         if self._loop is not None:
             self._loop.abort()
         self.devices.arm.halt()
+
+
+def _same_pose(a: Pose, b: Pose, tol: float = 0.005) -> bool:
+    """Whether two reported poses are the same: within ``tol`` (mm and degrees), under the
+    0.01 mm and 0.01 deg to which VAL reports a pose."""
+    return all(abs(getattr(a, f) - getattr(b, f)) <= tol
+               for f in ("x_mm", "y_mm", "z_mm", "o_deg", "a_deg", "t_deg"))

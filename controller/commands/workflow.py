@@ -133,15 +133,17 @@ def _position_run(args, fp: FinePositioner, offset) -> dict:
         dx, dy, dphi = offset
         fp.move_to(fp.state().nominal_pose.moved_in_tool_frame(
             ToolStep(-dx, -dy, 0.0, -dphi)))
-    result = fp.position(args.max_loops)
+    result = fp.position(args.max_loops, then_grasp=args.grasp)
+    # the grasp makes the converged step with its first move, and adds it to the run
+    grasp = fp.grasp().as_dict() if args.grasp and result.ok else None
     report = {"part": fp.config.controller.part, "run_id": result.run_id,
               "outcome": result.outcome, "reason": result.reason,
               "loops": result.loops, "iterations": result.iterations,
               "error": result.states[-1].error, "log": str(fp.log.path)}
     if args.record:
         report["record"] = args.record
-    if args.grasp and result.ok:
-        report["grasp"] = fp.grasp().as_dict()
+    if grasp is not None:
+        report["grasp"] = grasp
     report["ok"] = result.ok
     return report
 
@@ -259,7 +261,9 @@ def register(subparsers) -> None:
     p.add_argument("--offset", metavar="DX,DY,DPHI",
                    help="first move to the taught pose displaced by this (mm, mm, deg)")
     p.add_argument("--max-loops", type=loop_budget, help="loop budget (default from config)")
-    p.add_argument("--grasp", action="store_true", help="grasp after converging")
+    p.add_argument("--grasp", action="store_true",
+                   help="then grasp (where the loop converged or spent its budget), the "
+                        "converged step made by the grasp's first descent move")
     p.set_defaults(func=cmd_position)
 
     p = add_command(

@@ -153,17 +153,19 @@ def run_trials(system: str, model: TrainedModel, config, trials: int, seed: int,
             timed.times.clear()
             start_s = devices.clock()
             split0 = _split(devices.timing)
-            result = fp.position(budget)
-            states.append(result.states)
-            state_times.append([t - start_s for t in timed.times]
-                               if len(timed.times) == len(result.states) else None)
-            outcomes.append(result.outcome)
-            per_iteration.extend(result.seconds_per_iteration)
+            # with the grasp, the converged step is made by its first descent move, and the
+            # run's states get the state after it (``FinePositioner.grasp``)
+            result = fp.position(budget, then_grasp=grasp)
             if grasp:
                 g = fp.grasp()
                 held = bool(g.success and cell.holding)
                 grasps.append(held)
                 grasp_times.append(devices.clock() - start_s if held else None)
+            states.append(result.states)
+            state_times.append([t - start_s for t in timed.times]
+                               if len(timed.times) == len(result.states) else None)
+            outcomes.append(result.outcome)
+            per_iteration.extend(result.seconds_per_iteration)
             if split0 is not None:
                 wire, motion = (b - a for a, b in zip(split0, _split(devices.timing),
                                                        strict=True))

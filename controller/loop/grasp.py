@@ -3,7 +3,10 @@
 From the fine-positioned pre-grasp pose: open the jaws, bias the sensor, descend along the
 approach axis to the taught grasp depth (free space in one move, guarded steps where a finger
 can meet the part's top or rim, the rest in one move) while the guards watch every reading;
-close; lift; verify. A tripped guard ends the descent; ``retreat`` guards (and any failed
+close; lift; verify. The positioning loop's converged step, where it was left for the grasp
+(``PositioningLoop.run``'s ``carry_final_step``), is made with the first descent move: that
+move translates and turns by it as it descends, so the pose the loop read is reached without a
+move of its own. A tripped guard ends the descent; ``retreat`` guards (and any failed
 check) back off to the start pose. The outcome and the force trace are reported; nothing is
 retried silently.
 
@@ -21,6 +24,7 @@ reports none: its width is a configured nominal).
 from __future__ import annotations
 
 import logging
+from collections.abc import Callable
 from dataclasses import dataclass, field
 from typing import Literal
 
@@ -57,6 +61,11 @@ class GraspConfig:
     step is one VAL exchange and one move (about 0.35 s at 9600 baud); a large zone (100)
     steps all the way down, as a crowded table may need; contact_margin_mm: the last part of
     the descent in which contact is expected (guards named "early contact" are ignored there);
+    carry_final_step: where a grasp follows the positioning loop in the same run
+    (``finepos position --grasp``, the service's ``position`` job with ``grasp``, the
+    evaluation), the converged look's step (``controller.loop.final_step``) is made by the
+    first descent move instead of a move of its own (one VAL command and its motion fewer);
+    false: the loop makes it;
     check: how the grip is verified (see the module docstring): ``weight`` (the wrist
     sensor; works on every gripper), ``width`` (the finger width, for grippers that measure
     it) or ``both``; width_tolerance_mm: finger width must be within this of the taught
@@ -73,6 +82,7 @@ class GraspConfig:
     free_descent_mm: float = field(default=37.0, metadata={"min": 0.0, "max": 100.0})
     guard_zone_mm: float = field(default=4.0, metadata={"min": 0.0, "max": 1000.0})
     contact_margin_mm: float = field(default=2.0, metadata={"min": 0.0})
+    carry_final_step: bool = True
     check: GraspCheck = "weight"
     width_tolerance_mm: float = field(default=4.0, metadata={"min": 0.0})
     lift_mm: float = field(default=10.0, metadata={"min": 0.0})
@@ -96,7 +106,8 @@ class GraspResult:
     max_force_n: largest force seen; forces_n: force magnitude after each descent step;
     held_weight_n: the part's weight measured after the lift (None when not lifted);
     closing_force_n: how much the mean force changed while the jaws closed (None when they
-    did not close)."""
+    did not close); carried_step: the positioning loop's converged step the first descent
+    move made (None: none carried)."""
 
     success: bool
     reason: str
@@ -107,13 +118,16 @@ class GraspResult:
     retreated: bool = False
     held_weight_n: float | None = None
     closing_force_n: float | None = None
+    carried_step: ToolStep | None = None
 
     def as_dict(self) -> dict:
         """The result as a JSON-able dict, without the ``forces_n`` trace."""
         return {"success": self.success, "reason": self.reason, "depth_mm": self.depth_mm,
                 "width_mm": self.width_mm, "max_force_n": self.max_force_n,
                 "retreated": self.retreated, "held_weight_n": self.held_weight_n,
-                "closing_force_n": self.closing_force_n}
+                "closing_force_n": self.closing_force_n,
+                "carried_step": (self.carried_step.as_dict()
+                                 if self.carried_step is not None else None)}
 
 
 def mean_force(sensor: WrenchSensor, samples: int) -> np.ndarray:
@@ -124,11 +138,15 @@ def mean_force(sensor: WrenchSensor, samples: int) -> np.ndarray:
 
 def guarded_grasp(arm: Arm, sensor: WrenchSensor, grasp_depth_mm: float,
                   object_width_mm: float, config: GraspConfig,
-                  part_weight_n: float | None = None) -> GraspResult:
+                  part_weight_n: float | None = None, carried: ToolStep | None = None,
+                  on_carried: Callable[[], None] | None = None) -> GraspResult:
     """Run the grasp from the current (pre-grasp) pose. See the module docstring.
 
     Args:
         part_weight_n: the part's weight (N), for the weight check's default threshold.
+        carried: the positioning loop's converged step, made by the first descent move
+            (its dz is ignored; None: the first move descends only).
+        on_carried: called after that move has made it (the caller reads the pose reached).
 
     Raises:
         ValueError: the weight check has neither ``min_held_weight_n`` nor the part's weight.
@@ -163,7 +181,15 @@ def guarded_grasp(arm: Arm, sensor: WrenchSensor, grasp_depth_mm: float,
         else:
             step = grasp_depth_mm - depth
         step = min(step, grasp_depth_mm - depth)
-        arm.move_tool(ToolStep(dz_mm=step))
+        if depth == 0.0 and carried is not None:
+            # a tool step translates in the tool frame, then turns about its approach axis:
+            # the descent and the loop's step in one command end where the two would
+            arm.move_tool(ToolStep(carried.dx_mm, carried.dy_mm, step, carried.dphi_deg))
+            result.carried_step = ToolStep(carried.dx_mm, carried.dy_mm, 0.0, carried.dphi_deg)
+            if on_carried is not None:
+                on_carried()
+        else:
+            arm.move_tool(ToolStep(dz_mm=step))
         depth += step
         result.depth_mm = depth
         wrench = sensor.read()

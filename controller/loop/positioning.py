@@ -153,7 +153,10 @@ class PositioningResult:
     occluded | rejected; reason
     in words;
     loops: cumulative loop count spent; states: LoopState at the start and after every move;
-    seconds_per_iteration: wall time of each look-and-move iteration."""
+    seconds_per_iteration: wall time of each look-and-move iteration;
+    carried: the converged look's step, left for the grasp's first descent move to make
+    (``run``'s ``carry_final_step``; None: made, or none to make). The grasp that makes it
+    adds its full loop and the state after it (``FinePositioner.grasp``)."""
 
     run_id: str
     outcome: Outcome
@@ -162,6 +165,7 @@ class PositioningResult:
     iterations: int
     states: list[LoopState]
     seconds_per_iteration: list[float]
+    carried: ToolStep | None = None
 
     @property
     def ok(self) -> bool:
@@ -207,13 +211,17 @@ class PositioningLoop:
         return tuple(self.ground_truth()) if self.ground_truth else None
 
     def run(self, estimator: Estimator, max_loops: float | None = None,
-            run_id: str | None = None) -> PositioningResult:
+            run_id: str | None = None, carry_final_step: bool = False) -> PositioningResult:
         """Position from wherever the arm is, one look per iteration, until converged.
 
         Args:
             estimator: the vision system (``controller.systems``).
             max_loops: the loop budget (default ``config.max_loops``).
             run_id: names the run in the iteration log (default: a fresh random id).
+            carry_final_step: a grasp follows: the converged look's step
+                (``LoopConfig.final_step``) is not made here but returned as the result's
+                ``carried``, for the grasp's first descent move to make (the same move, no
+                extra one). The look is logged as ``check`` with ``final_step: carried``.
 
         Returns:
             The outcome, the loops spent and the state after every move (see
@@ -245,11 +253,12 @@ class PositioningLoop:
             per_iteration.append(outcome)
             return None
 
-        def finish(outcome: Outcome, reason: str) -> PositioningResult:
+        def finish(outcome: Outcome, reason: str,
+                   carried: ToolStep | None = None) -> PositioningResult:
             logger.debug("positioning %s: %s after %.1f loops (%s)", run_id, outcome, loops,
                          reason)
             return PositioningResult(run_id, outcome, reason, loops, iteration, states,
-                                     per_iteration)
+                                     per_iteration, carried)
 
         while True:
             if self._abort:
@@ -331,6 +340,10 @@ class PositioningLoop:
                 if cfg.final_step and loops + cost <= budget + 1e-9 \
                         and (shift >= FINAL_STEP_MIN_MM
                              or abs(step.dphi_deg) >= FINAL_STEP_MIN_DEG):
+                    if carry_final_step:
+                        record.estimates["final_step"] = "carried"
+                        self._write(record, "check", (t0, t1, t2), frame.image)
+                        return finish("converged", reason + ", carried to the grasp", step)
                     refused = move(record, "check", cost, (t0, t1, t2), frame.image)
                     if refused is not None:
                         return refused

@@ -100,7 +100,11 @@ GUARD_EVENT = {
     "properties": {"success": {"type": "boolean"}, "reason": {"type": "string"},
                    "depth_mm": {"type": "number"}, "width_mm": {"type": ["number", "null"]},
                    "max_force_n": {"type": "number"}, "retreated": {"type": "boolean"},
-                   "held_weight_n": {"type": ["number", "null"]}},
+                   "held_weight_n": {"type": ["number", "null"]},
+                   "closing_force_n": {"type": ["number", "null"]},
+                   "carried_step": {"type": ["object", "null"],
+                                    "description": "the positioning loop's converged step, "
+                                                   "made by the first descent move"}},
     "required": ["success", "reason"],
 }
 

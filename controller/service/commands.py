@@ -72,6 +72,9 @@ COMMANDS: dict[str, dict[str, Arg]] = {
         "offset": Arg(list, None, items=((-50.0, 50.0), (-50.0, 50.0), (-180.0, 180.0)),
                       help="simulated cell: first displace the arm from the taught pose by "
                            "[dx_mm, dy_mm, dphi_deg]"),
+        "grasp": Arg(bool, False, help="then grasp (where the loop ended converged or at its "
+                                       "budget), the converged step made by the grasp's "
+                                       "first descent move"),
         "wait": WAIT,
     },
     "grasp": {"part": PART, "wait": WAIT},

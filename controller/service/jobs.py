@@ -137,13 +137,19 @@ def _position(ctx: JobContext) -> dict[str, Any]:
     if args["offset"] is not None:
         dx, dy, dphi = args["offset"]
         fp.move_to(fp.state().nominal_pose.moved_in_tool_frame(ToolStep(-dx, -dy, 0.0, -dphi)))
-    result = fp.position(args["max_loops"])
+    result = fp.position(args["max_loops"], then_grasp=args["grasp"])
+    # the grasp makes the converged step with its first move, and adds it to the run
+    grasp = fp.grasp() if args["grasp"] and result.ok else None
     error = result.states[-1].error
     report = {"part": ctx.part, "run_id": result.run_id, "outcome": result.outcome,
               "reason": result.reason, "loops": result.loops, "iterations": result.iterations,
               "error": list(error) if error is not None else None}
     if not result.ok:
         raise JobFailed(f"{result.outcome}: {result.reason}", report)
+    if grasp is not None:
+        report["grasp"] = grasp.as_dict()
+        if not grasp.success:
+            raise JobFailed(f"grasp failed: {grasp.reason}", report)
     return report
 
 

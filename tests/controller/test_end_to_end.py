@@ -167,3 +167,35 @@ def test_cli_rezero_moves_the_zero_to_the_new_light_and_refuses_a_moved_part(tra
     err = capsys.readouterr().err.strip().splitlines()
     assert "the part is not where it was taught" in err[-1]
     assert model.read_bytes() == written
+
+
+def test_position_then_grasp_makes_the_converged_step_with_the_first_descent(trained, caplog):
+    """With a grasp to follow, the loop leaves its converged step to the grasp's first move;
+    the run gets that loop and the state after it. Where the arm moved in between, the
+    step is not carried."""
+    cfg = load_config(None)
+    offset = ToolStep(6.0, -4.0, 0.0, 12.0)
+    with open_devices(cfg, seed=3) as devices:
+        fp = FinePositioner(devices, cfg, state_dir=trained)
+        fp.move_to(fp.state().nominal_pose.moved_in_tool_frame(offset))
+        result = fp.position(then_grasp=True)
+        assert result.outcome == "converged" and result.carried is not None, result.reason
+        loops, states = result.loops, len(result.states)
+        left_at = devices.arm.pose()
+        grasp = fp.grasp()
+        assert grasp.success and devices.cell.holding, grasp.reason
+        assert grasp.carried_step == dataclasses.replace(result.carried, dz_mm=0.0)
+        assert result.loops == loops + 1.0 and len(result.states) == states + 1
+        assert "made by the grasp's first move" in result.reason
+        assert is_safe(result.states[-1].error)
+        assert devices.arm.pose() != left_at
+        # the arm moved after the loop: the grasp descends straight
+        devices.arm.open_gripper()
+        devices.cell.place_object(*devices.cell.object_pose())
+        fp.move_to(fp.state().nominal_pose.moved_in_tool_frame(offset))
+        result = fp.position(then_grasp=True)
+        assert result.carried is not None, result.reason
+        fp.move_to(fp.state().nominal_pose)
+        with caplog.at_level("WARNING"):
+            grasp = fp.grasp()
+        assert grasp.carried_step is None and "not carried" in caplog.text

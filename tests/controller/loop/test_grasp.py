@@ -5,6 +5,7 @@ import pytest
 
 from controller.loop.grasp import GraspConfig, guarded_grasp
 from controller.loop.guards import Guard, first_tripped, tripped
+from drivers.core.pose import ToolStep
 from drivers.interfaces import Wrench
 from tests.mocks.fakes import HOME, FakeArm, FakeWrenchSensor
 
@@ -204,3 +205,23 @@ def test_held_weight_check(weight_n, min_n, success):
     assert res.held_weight_n == pytest.approx(weight_n)
     if not success:
         assert "N on the wrist" in res.reason and arm.pose() == start
+
+
+def test_the_first_descent_move_makes_the_carried_step():
+    arm, sensor = setup(contact_depth_mm=60.0)
+    start = arm._pose
+    made = []
+    carried = ToolStep(0.04, -0.03, 0.0, 0.2)
+    res = guarded_grasp(arm, sensor, 40.0, 30.0, BY_WIDTH, carried=carried,
+                        on_carried=lambda: made.append(arm._pose))
+    assert res.success and res.carried_step == carried
+    assert res.as_dict()["carried_step"] == carried.as_dict()
+    # one call, after the first move: the step and the free descent in one command
+    expected = start.moved_in_tool_frame(ToolStep(0.04, -0.03, 37.0, 0.2))
+    assert len(made) == 1
+    for f in ("x_mm", "y_mm", "z_mm", "t_deg"):
+        assert getattr(made[0], f) == pytest.approx(getattr(expected, f), abs=1e-9)
+    # without a carried step the descent moves straight down
+    arm, sensor = setup(contact_depth_mm=60.0)
+    res = guarded_grasp(arm, sensor, 40.0, 30.0, BY_WIDTH)
+    assert res.carried_step is None and res.as_dict()["carried_step"] is None

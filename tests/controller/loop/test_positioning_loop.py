@@ -557,3 +557,22 @@ def test_the_converged_look_makes_no_step_beyond_the_budget():
     moves = len(arm.moves)
     assert result.outcome == "converged" and result.loops == 2.0
     assert moves == len(result.states) - 1 and "made" not in result.reason
+
+
+def test_a_grasp_to_follow_gets_the_converged_step_instead_of_a_move(tmp_path):
+    arm, cam, cfg = make(ToolStep(0.3, -0.2, 0.0, 2.0), settle_frames=1)
+    with IterationLog(tmp_path / "it.jsonl") as log:
+        result = PositioningLoop(arm, cam, cfg, log, lambda: truth_error(arm)).run(
+            TruthEstimator(arm, gain=0.5), carry_final_step=True)
+    records = read_log(tmp_path / "it.jsonl")
+    last = records[-1]
+    assert result.outcome == "converged" and "carried to the grasp" in result.reason
+    assert last["loop_kind"] == "check" and last["final_step"] == "carried"
+    assert last["executed"] is None and len(arm.moves) == len(records) - 1
+    assert result.carried is not None and result.carried.as_dict() == last["commanded"]
+    assert result.loops == records[-2]["loops"] == result.states[-1].loops
+    # nothing to carry where the loop makes no step: the budget spent on the last look
+    arm, cam, cfg = make(ToolStep(0.3, -0.2, 0.0, 2.0), settle_frames=1, max_loops=2.0)
+    result = PositioningLoop(arm, cam, cfg).run(TruthEstimator(arm, gain=0.5),
+                                                carry_final_step=True)
+    assert result.outcome == "converged" and result.carried is None

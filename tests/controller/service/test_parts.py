@@ -28,9 +28,9 @@ def positioned(monkeypatch) -> list[tuple[str, object]]:
     runs: list[tuple[str, object]] = []
     original = FinePositioner.position
 
-    def position(self, max_loops=None):
+    def position(self, max_loops=None, then_grasp=False):
         runs.append((self.config.controller.part, self._model))
-        return original(self, max_loops)
+        return original(self, max_loops, then_grasp)
 
     monkeypatch.setattr(FinePositioner, "position", position)
     return runs
@@ -149,4 +149,20 @@ def test_a_rezero_job_rewrites_the_parts_model_and_puts_it_in_use(tmp_path, shor
         job = client.call("rezero", wait=True, part="cube", system="align")["job"]
         assert job["outcome"] == "failed" and "no trained align model" in job["reason"], job
         assert service._models.slot("cube").model is now  # the Gabor model stays in use
+        assert client.call("status")["state"] == "idle"
+
+
+def test_a_position_job_with_grasp_grasps_where_the_loop_ended(tmp_path, short_dir,
+                                                              two_part_model_files):
+    config = service_config(tmp_path, short_dir)
+    copy_state(two_part_model_files, config)
+    with running_service(config, _fake_cell()) as service, client_for(service) as client:
+        job = client.call("position", wait=True, part="cube", max_loops=1, grasp=True,
+                          timeout_s=EVENT_TIMEOUT_S)["job"]
+        # the loop ended within its budget, the grasp followed in the same job; the fake
+        # gripper closes on nothing, so the grip check fails and the grasp retreats
+        assert job["outcome"] == "failed", job
+        assert job["reason"].startswith("grasp failed: grip check failed"), job
+        assert job["result"]["outcome"] in ("converged", "budget")
+        assert job["result"]["grasp"]["retreated"] is True
         assert client.call("status")["state"] == "idle"

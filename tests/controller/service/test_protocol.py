@@ -30,7 +30,8 @@ def test_a_valid_request_gets_its_defaults():
         ("acquire", {"part": None, "set": "nn2", "seed": 0, "wait": False}, "a")
     assert parse('{"cmd": "status"}').args == {}
     assert parse('{"cmd": "position", "args": {"offset": [1, -2.5, 30]}}').args == \
-        {"part": None, "max_loops": None, "offset": [1.0, -2.5, 30.0], "wait": False}
+        {"part": None, "max_loops": None, "offset": [1.0, -2.5, 30.0], "grasp": False,
+         "wait": False}
     assert parse('{"cmd": "grasp", "args": {"part": "nut"}}').args == {"part": "nut",
                                                                         "wait": False}
 
