@@ -32,16 +32,19 @@ Commands (arguments, types, ranges and defaults in ``commands.COMMANDS``):
   gabor | align; re-zero the part's model at the taught pose in the cell's light,
   ``FinePositioner.rezero``; the part must lie where it was taught; it is put into use unless
   another system's model is),
-  ``position`` (``max_loops``; ``offset`` [dx_mm, dy_mm, dphi_deg]: simulated cell only),
-  ``grasp``. Each takes ``part`` (cube | nut | ledge | screw; default: the one part taught, else
-  the cell's; for ``teach`` the cell's: the simulated table's, or ``controller.part``; refused
-  as ``bad_request`` when several parts are taught and none is named): the job works in that
-  part's state folder with that part's model, and on the simulated cell the part is put on the
-  table first (the cell is built anew with it). Every taught part's model stays loaded (one slot
-  per part), so positioning another part loads nothing. Each takes ``wait``: false (default)
-  answers when the job has started, true when it has ended; the job's ``outcome`` is done,
-  failed (the reason says why, e.g. ``no_object: ...`` or ``grasp failed: excessive force
-  ...``), aborted, or fault;
+  ``position`` (``max_loops``; ``offset`` [dx_mm, dy_mm, dphi_deg]: simulated cell only;
+  ``grasp``: then grasp in the same job, where the loop converged or spent its budget, the
+  converged look's step made by the grasp's first descent move,
+  ``controller.grasp.carry_final_step``; the result holds the grasp's under ``grasp`` and a
+  failed grasp fails the job), ``grasp``. Each takes ``part`` (cube | nut | ledge | screw;
+  default: the one part taught, else the cell's; for ``teach`` the cell's: the simulated
+  table's, or ``controller.part``; refused as ``bad_request`` when several parts are taught and
+  none is named): the job works in that part's state folder with that part's model, and on the
+  simulated cell the part is put on the table first (the cell is built anew with it). Every
+  taught part's model stays loaded (one slot per part), so positioning another part loads
+  nothing. Each takes ``wait``: false (default) answers when the job has started, true when it
+  has ended; the job's ``outcome`` is done, failed (the reason says why, e.g. ``no_object: ...``
+  or ``grasp failed: excessive force ...``), aborted, or fault;
 - ``abort``: preempts the running job (no further motion command is sent) and halts the arm;
   it answers once the halt was acknowledged or after ``service.abort_wait_s`` (then
   ``halt_error`` says the halt is still waiting, and a ``halt`` event reports its outcome);
