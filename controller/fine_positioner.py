@@ -305,6 +305,8 @@ class FinePositioner:
             else:
                 logger.warning("the arm moved after positioning run %s: its converged step is "
                                "not carried to the grasp", run.run_id)
+                run.reason = run.reason.replace(", carried to the grasp",
+                                                ", not made (the arm moved before the grasp)")
         state = self.state()
         recorder = self.recorder
         clock = getattr(self.devices, "clock", None)  # cell seconds, for the recording

@@ -199,3 +199,4 @@ def test_position_then_grasp_makes_the_converged_step_with_the_first_descent(tra
         with caplog.at_level("WARNING"):
             grasp = fp.grasp()
         assert grasp.carried_step is None and "not carried" in caplog.text
+        assert result.reason.endswith("not made (the arm moved before the grasp)")
