@@ -77,3 +77,29 @@ def test_frames_at_the_taught_pose_come_first_and_are_counted():
     np.testing.assert_allclose(data.labels[3:, 2], offsets[:, 2], atol=1e-9)
     assert acquire(arm, cam, NOMINAL, offsets, name="t",
                    progress=False).metadata["taught_frames"] == 0
+
+
+def test_each_frame_at_the_taught_pose_follows_its_own_approach_from_another_side():
+    """The arm's repeatability error is drawn at every move: frames after one approach
+    share one, so each taught-pose frame is taken after leaving the pose and coming back."""
+    arm = active(FakeArm(start=NOMINAL))
+    grabbed_after: list[int] = []
+    cam = active(FakeCamera())
+    grab = cam.grab
+
+    def counting_grab():
+        grabbed_after.append(len(arm.moves))
+        return grab()
+
+    cam.grab = counting_grab
+    acquire(arm, cam, NOMINAL, np.array([[5.0, -5.0, 10.0]]), name="t", progress=False,
+            taught_frames=4)
+    taught = grabbed_after[:4]
+    sides = []
+    for n in taught:
+        away, back = arm.moves[n - 2], arm.moves[n - 1]
+        assert back.tool_step_to(NOMINAL).translation_mm == pytest.approx(0.0, abs=1e-9)
+        step = NOMINAL.tool_step_to(away)
+        assert step.translation_mm == pytest.approx(1.0, abs=1e-9)
+        sides.append((round(step.dx_mm, 6), round(step.dy_mm, 6)))
+    assert len(set(sides)) == 4 and np.diff(taught).min() == 2
