@@ -200,8 +200,9 @@ def register(subparsers) -> None:
         description="Example: finepos acquire --set nn1\n\nDrive the grid of displacements "
                     "(nn1: a = 25 mm, nn2: a = 5 mm, b = 180/kappa deg, 3x3x7; each first "
                     "takes controller.acquisition.taught_pose_frames frames, 4, at the taught "
-                    "pose) or a random test set, and store the dataset in the part's state "
-                    "folder (state/<part>/datasets/<set>.npz).")
+                    "pose, each after leaving it by 1 mm and coming back) or a random test "
+                    "set, and store the dataset in the part's state folder "
+                    "(state/<part>/datasets/<set>.npz).")
     add_config_option(p)
     add_device_options(p)
     add_part_option(p, TAUGHT_PART_HELP)
