@@ -21,7 +21,7 @@ from calibration_free.dataset import Dataset
 from calibration_free.rezero import rezero
 from controller.loop.grasp import GraspResult, guarded_grasp
 from controller.loop.iteration_log import IterationLog
-from controller.loop.positioning import LoopState, PositioningLoop, PositioningResult
+from controller.loop.positioning import PositioningLoop, PositioningResult
 from controller.systems.base import TrainedModel
 from controller.systems.registry import SYSTEMS
 from controller.teach.acquisition import acquire, grid_for, random_set, transfer
@@ -305,8 +305,7 @@ class FinePositioner:
             else:
                 logger.warning("the arm moved after positioning run %s: its converged step is "
                                "not carried to the grasp", run.run_id)
-                run.reason = run.reason.replace(", carried to the grasp",
-                                                ", not made (the arm moved before the grasp)")
+                run.carried_dropped()
         state = self.state()
         recorder = self.recorder
         clock = getattr(self.devices, "clock", None)  # cell seconds, for the recording
@@ -326,11 +325,7 @@ class FinePositioner:
         truth = self.devices.ground_truth if self.devices.cell is not None else None
 
         def made() -> None:
-            run.loops += 1.0
-            run.iterations += 1
-            run.states.append(LoopState(run.loops, tuple(truth()) if truth else None))
-            run.reason = run.reason.replace(", carried to the grasp",
-                                            ", and made by the grasp's first move")
+            run.carried_made(tuple(truth()) if truth else None)
         return made
 
     def abort(self) -> None:

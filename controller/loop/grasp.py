@@ -23,6 +23,7 @@ reports none: its width is a configured nominal).
 
 from __future__ import annotations
 
+import dataclasses
 import logging
 from collections.abc import Callable
 from dataclasses import dataclass, field
@@ -184,8 +185,8 @@ def guarded_grasp(arm: Arm, sensor: WrenchSensor, grasp_depth_mm: float,
         if depth == 0.0 and carried is not None:
             # a tool step translates in the tool frame, then turns about its approach axis:
             # the descent and the loop's step in one command end where the two would
-            arm.move_tool(ToolStep(carried.dx_mm, carried.dy_mm, step, carried.dphi_deg))
-            result.carried_step = ToolStep(carried.dx_mm, carried.dy_mm, 0.0, carried.dphi_deg)
+            arm.move_tool(dataclasses.replace(carried, dz_mm=step))
+            result.carried_step = dataclasses.replace(carried, dz_mm=0.0)
             if on_carried is not None:
                 on_carried()
         else:

@@ -52,6 +52,8 @@ STOPPED: tuple[Outcome, ...] = ("no_object", "ambiguous", "out_of_range", "incon
 # than the arm resolves (VAL takes a pose to 0.01 mm and 0.001 deg).
 FINAL_STEP_MIN_MM = 1e-3
 FINAL_STEP_MIN_DEG = 1e-3
+# How a converged run's reason ends while its step waits for the grasp (``PositioningResult``).
+CARRIED = ", carried to the grasp"
 
 
 class LookRecorder(Protocol):
@@ -171,6 +173,18 @@ class PositioningResult:
     def ok(self) -> bool:
         """The loop ran to convergence or spent its budget (no lost part, no rejection)."""
         return self.outcome in ("converged", "budget")
+
+    def carried_made(self, error: tuple[float, float, float] | None) -> None:
+        """The grasp's first move made the ``carried`` step: count it as the full loop the
+        loop would have made, with ``error`` the state after it."""
+        self.loops += 1.0
+        self.iterations += 1
+        self.states.append(LoopState(self.loops, error))
+        self.reason = self.reason.replace(CARRIED, ", and made by the grasp's first move")
+
+    def carried_dropped(self) -> None:
+        """The ``carried`` step was not made (the arm moved before the grasp)."""
+        self.reason = self.reason.replace(CARRIED, ", not made (the arm moved before the grasp)")
 
 
 def _turn_within_limits(step: ToolStep, arm: Arm) -> ToolStep:
@@ -343,7 +357,7 @@ class PositioningLoop:
                     if carry_final_step:
                         record.estimates["final_step"] = "carried"
                         self._write(record, "check", (t0, t1, t2), frame.image)
-                        return finish("converged", reason + ", carried to the grasp", step)
+                        return finish("converged", reason + CARRIED, step)
                     refused = move(record, "check", cost, (t0, t1, t2), frame.image)
                     if refused is not None:
                         return refused
