@@ -32,6 +32,8 @@ from calibration_free import angles
 from calibration_free.bundle import ModelBundle
 from calibration_free.errors import TrainingError
 from calibration_free.perception import Perception
+from calibration_free.pin import pinned
+from calibration_free.pin import whole as seen_whole_part
 
 # A reading at the taught pose beyond these is not a change of light (a quarter pixel is about
 # 0.25 mm): the part is not where it was taught, or the camera was knocked.
@@ -41,8 +43,6 @@ MAX_TURN_DEG = 3.0
 NN2_MIN_DEG = 1.0
 # At least this share of the frames must show the part whole.
 MIN_FOUND_SHARE = 0.75
-# A frame shows the part whole where its blob is within this share of the taught area.
-WHOLE_SHARE = 0.9
 
 
 @dataclass(frozen=True)
@@ -79,7 +79,7 @@ def rezero(bundle: ModelBundle, images: Sequence[np.ndarray]) -> Rezeroed:
     require_frames(images)
     perception = Perception(bundle)
     percepts = [perception.perceive(image) for image in images]
-    whole = [i for i, p in enumerate(percepts) if p.ok and _whole(p)]
+    whole = [i for i, p in enumerate(percepts) if seen_whole_part(p)]
     require_seen_whole(len(whole), len(images))
     nn2_deg, turned = None, False
     if bundle.axis is None:  # NN2 first: the translation nets read its (sin, cos)
@@ -91,20 +91,8 @@ def rezero(bundle: ModelBundle, images: Sequence[np.ndarray]) -> Rezeroed:
         if turned:
             bundle = dataclasses.replace(bundle, nn2=bundle.nn2.turned(
                 math.radians(kappa * nn2_deg)))
-            perception = Perception(bundle)
-            percepts = [perception.perceive(images[i]) if i in whole else p
-                        for i, p in enumerate(percepts)]
-    nn1 = np.mean([percepts[i].nn1_mm for i in whole], axis=0)
-    rot = np.mean([percepts[i].rot_mm for i in whole], axis=0)
-    require_near_shift("the model", max(float(np.hypot(*nn1)), float(np.hypot(*rot))))
-    shifted = dataclasses.replace(bundle, nn1=bundle.nn1.shifted(nn1),
-                                  nn1_rot=bundle.nn1_rot.shifted(rot))
-    shift = {"nn1": tuple(map(float, nn1)), "nn1_rot": tuple(map(float, rot))}
-    if bundle.near_mm > 0.0:  # the near correction adds to nn1_rot's reading where it is near
-        again = Perception(shifted)
-        near = np.mean([again.perceive(images[i]).full_mm for i in whole], axis=0)
-        shifted = dataclasses.replace(shifted, nn1_near=shifted.nn1_near.shifted(near))
-        shift["nn1_near"] = tuple(map(float, near))
+    shifted, shift = pinned(bundle, [images[i] for i in whole],
+                            check=lambda mm: require_near_shift("the model", mm))
     result = Rezeroed(shifted, shift, nn2_deg, turned, len(whole), len(images))
     history = [*bundle.training.get("rezero", []), result.report()]
     return dataclasses.replace(result, bundle=dataclasses.replace(
@@ -139,13 +127,3 @@ def require_near_shift(reader: str, mm: float) -> None:
         raise TrainingError(f"rezero: at the taught pose {reader} reads {mm:.2f} mm, over "
                             f"{MAX_SHIFT_MM:g} mm: the part is not where it was taught, or the "
                             f"camera moved (teach again); the model is unchanged")
-
-
-def _whole(percept) -> bool:
-    return percept.hidden_share is None and percept.hidden_px is None and \
-        seen_whole(percept.seen_share)
-
-
-def seen_whole(share: float | None) -> bool:
-    """Whether a blob's share of the taught area (None: not known) shows the part whole."""
-    return share is None or share >= WHOLE_SHARE

@@ -40,6 +40,7 @@ from calibration_free.localise import (
 )
 from calibration_free.mlp import TrainedMLP, train_mlp
 from calibration_free.outline import taught_outline, turned_outlines
+from calibration_free.pin import pinned
 from calibration_free.preprocess import (
     Channel,
     IntensityStats,
@@ -574,10 +575,28 @@ def train_bundle(nn1_data: Dataset, nn2_data: Dataset, *, object_kind: str, kapp
     logger.info("trained %s bundle in %.2f s (NN1 loss %.2e, NN2 loss %.2e)", object_kind,
                 training["seconds"], nn1.loss_curve[-1], nn2.loss_curve[-1])
     front = dataclasses.replace(prep.front, nominal_uv_px=nominal_uv)
-    return ModelBundle(object_kind=object_kind, kappa=kappa, nominal_pose=pose, front=front,
-                       gabor=gabor, nn1=nn1.model, nn1_rot=nn1_rot.model,
-                       nn1_near=nn1_near.model, near_mm=near_mm, nn2=nn2.model,
-                       axis=axis, training=training)
+    bundle = ModelBundle(object_kind=object_kind, kappa=kappa, nominal_pose=pose, front=front,
+                         gabor=gabor, nn1=nn1.model, nn1_rot=nn1_rot.model,
+                         nn1_near=nn1_near.model, near_mm=near_mm, nn2=nn2.model,
+                         axis=axis, training=training)
+    # every set's frames at the taught pose, weighted as the translation nets' first pin
+    return pinned_as_read(bundle, [sets[name].images[i] for name in sets
+                                   for i in np.flatnonzero(at_taught_pose(sets[name].labels))])
+
+
+def pinned_as_read(bundle: ModelBundle, taught_images: list[np.ndarray]) -> ModelBundle:
+    """The bundle with its translation nets pinned once more on the frames at the taught pose,
+    as the loop reads them: with NN2's (or the axis map's) turn there, not the label's zero
+    (``calibration_free.pin``). Its ``training["pinned_as_read_mm"]`` keeps each shift (None:
+    no frame at the taught pose shows the part whole, and the nets stay as trained)."""
+    try:
+        shifted, shift = pinned(bundle, taught_images)
+    except TrainingError as exc:
+        logger.warning("the translation nets are not pinned as read: %s", exc)
+        shifted, shift = bundle, None
+    record = None if shift is None else {k: [round(v, 4) for v in s] for k, s in shift.items()}
+    return dataclasses.replace(shifted, training={**bundle.training,
+                                                  "pinned_as_read_mm": record})
 
 
 def _translation_samples(uv: np.ndarray, labels: np.ndarray, kappa: int

@@ -23,12 +23,12 @@ import numpy as np
 
 from calibration_free import angles
 from calibration_free.baselines.align.model import AlignModel
+from calibration_free.pin import seen_whole
 from calibration_free.rezero import (
     require_frames,
     require_near_shift,
     require_near_turn,
     require_seen_whole,
-    seen_whole,
 )
 
 
