@@ -579,9 +579,10 @@ def train_bundle(nn1_data: Dataset, nn2_data: Dataset, *, object_kind: str, kapp
                          gabor=gabor, nn1=nn1.model, nn1_rot=nn1_rot.model,
                          nn1_near=nn1_near.model, near_mm=near_mm, nn2=nn2.model,
                          axis=axis, training=training)
-    # every set's frames at the taught pose, weighted as the translation nets' first pin
-    return pinned_as_read(bundle, [sets[name].images[i] for name in sets
-                                   for i in np.flatnonzero(at_taught_pose(sets[name].labels))])
+    # every frame at the taught pose once (``nn1_extra`` is mostly the NN2 set again)
+    distinct = {id(data): data for data in sets.values()}.values()
+    return pinned_as_read(bundle, [data.images[i] for data in distinct
+                                   for i in np.flatnonzero(at_taught_pose(data.labels))])
 
 
 def pinned_as_read(bundle: ModelBundle, taught_images: list[np.ndarray]) -> ModelBundle:

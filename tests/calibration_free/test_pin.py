@@ -62,9 +62,8 @@ def test_frames_without_the_part_pin_nothing(saturation_bundle, cell):
 def test_training_pins_the_nets_on_its_taught_frames_as_read(saturation_bundle, grids):
     record = saturation_bundle.training["pinned_as_read_mm"]
     assert set(record) == {"nn1", "nn1_rot", "nn1_near"}
-    nn1_data, nn2_data = grids
-    # the sets it trained on (nn1, nn2 and nn2 again as nn1_extra), weighted as the first pin
-    taught = [data.images[i] for data in (nn1_data, nn2_data, nn2_data)
+    # every frame at the taught pose once (the NN2 set is also NN1's extra set here)
+    taught = [data.images[i] for data in grids
               for i in np.flatnonzero(at_taught_pose(data.labels))]
     assert taught
     # on the frames it was pinned on, the loop's reading is zero on average
