@@ -30,6 +30,13 @@ light, as `finepos rezero` does on a cell whose light changed, then run the tria
 rezero: what each translation net read there before, mm; --system align: the servo's template
 taken again, and what it read there before).
 
+Also: finepos evaluate --lighting poor --teach-lighting poor --trials 50
+
+--teach-lighting: teach-in, acquisition and training under that lighting preset instead of the
+default scene's good light (with --part all: every part's), as on a cell taught in the light it
+works in; the trials' light is still --lighting (or the scene's). The report's teach_lighting
+names the light the model was taught in (null with --model).
+
 Also: finepos evaluate --mounts 10 --trials 50 --json out/mounts.json
 
 --mounts N: N random cameras (mount tilt +/-8 deg, roll and pan +/-4 deg, offset +/-5 mm, field
@@ -73,6 +80,11 @@ def run(args) -> int:
                           f"{args.system}")
     if args.rezero and args.mounts is not None:
         raise ConfigError("--rezero: not with --mounts (each camera is trained on its own)")
+    if args.teach_lighting and args.model:
+        raise ConfigError("--teach-lighting: not with --model (the model is trained already)")
+    if args.teach_lighting and args.mounts is not None:
+        raise ConfigError("--teach-lighting: not with --mounts (each camera is taught in the "
+                          "scene's light)")
     if args.part == ALL_PARTS:
         return _evaluate_parts(args, config)
     if args.workers != 1:
@@ -85,7 +97,8 @@ def run(args) -> int:
             report = evaluate(args.system, config, trials=args.trials, seed=args.seed,
                               lighting=args.lighting, model_path=args.model,
                               grasp=not args.no_grasp, log=log, progress=not args.quiet,
-                              hil=args.hil, recorder=recorder, rezero=args.rezero)
+                              hil=args.hil, recorder=recorder, rezero=args.rezero,
+                              teach_lighting=args.teach_lighting)
     finally:
         if log:
             log.close()
@@ -108,7 +121,8 @@ def _evaluate_parts(args, config) -> int:
     lightings = (args.lighting,) if args.lighting else ("good", "poor")
     report = run_parts_table(config, system=args.system, trials=args.trials, seed=args.seed,
                              lightings=lightings, grasp=not args.no_grasp, workers=args.workers,
-                             progress=not args.quiet, rezero=args.rezero)
+                             progress=not args.quiet, rezero=args.rezero,
+                             teach_lighting=args.teach_lighting)
     if args.json:
         atomic_write_text(args.json, json.dumps(report, indent=2) + "\n")
         print(f"report: {args.json}", file=sys.stderr)
@@ -139,6 +153,10 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--lighting", choices=["good", "poor", "dim", "side"],
                         help="override the scene's lighting preset (--part all: only this one "
                              "instead of good and poor)")
+    parser.add_argument("--teach-lighting", choices=["good", "poor", "dim", "side"],
+                        help="teach, acquire and train under this lighting preset instead of "
+                             "the default scene's good light (a cell taught in the light it "
+                             "works in; see above)")
     parser.add_argument("--trials", type=positive_int, default=100)
     parser.add_argument("--mounts", type=positive_int, metavar="N",
                         help="evaluate on N random cameras and mounts (see above)")

@@ -74,7 +74,8 @@ def _run_trials_job(job: _TrialsJob, tick: Tick) -> dict:
 def run_parts_table(config, *, system: str = "gabor", trials: int, seed: int,
                     part_names: tuple[str, ...] = tuple(parts.PARTS),
                     lightings: tuple[str, ...] = LIGHTINGS, grasp: bool = True,
-                    workers: int = 1, progress: bool = True, rezero: bool = False) -> dict:
+                    workers: int = 1, progress: bool = True, rezero: bool = False,
+                    teach_lighting: str | None = None) -> dict:
     """Train each part once, run every (part, lighting) pair's trials; the JSON report.
 
     Args:
@@ -90,6 +91,8 @@ def run_parts_table(config, *, system: str = "gabor", trials: int, seed: int,
         progress: show progress bars.
         rezero: re-zero each part's model in each pair's light before its trials
             (``trials.rezeroed_on``; each row's ``rezero`` says what moved).
+        teach_lighting: teach each part, acquire and train under this lighting preset
+            instead of the default scene's (each row's ``teach_lighting``).
 
     Returns:
         ``{"system", "trials", "seed", "wall_seconds", "rows": [...]}``: one ``finepos
@@ -109,7 +112,8 @@ def run_parts_table(config, *, system: str = "gabor", trials: int, seed: int,
         for kind in part_names:
             logger.info("parts table: teach-in, acquisition and training on the %s", kind)
             models[kind], acquisitions[kind] = train_on_default_scene(
-                system, configs[kind], Path(tmp) / kind, seed, progress)
+                system, configs[kind], Path(tmp) / kind, seed, progress,
+                lighting=teach_lighting)
     jobs = [_TrialsJob(kind, light, system, models[kind], configs[kind], trials, seed, grasp,
                        rezero)
             for kind in part_names for light in lightings]

@@ -69,22 +69,27 @@ def with_test_camera(config):
 
 
 def train_on_default_scene(system: str, config, work_dir: Path, seed: int,
-                           progress: bool = True, hil: bool = False) -> tuple[TrainedModel, dict]:
-    """Teach (auto), acquire the NN1 and NN2 grids and train, on the default scene."""
+                           progress: bool = True, hil: bool = False,
+                           lighting: str | None = None) -> tuple[TrainedModel, dict]:
+    """Teach (auto), acquire the NN1 and NN2 grids and train, on the default scene
+    (``lighting``: under that lighting preset instead of the default scene's)."""
     models, acquisition = train_systems_on_default_scene((system,), config, work_dir, seed,
-                                                         progress, hil)
+                                                         progress, hil, lighting)
     return models[system], acquisition
 
 
 def train_systems_on_default_scene(systems: Sequence[str], config, work_dir: Path, seed: int,
-                                   progress: bool = True, hil: bool = False
+                                   progress: bool = True, hil: bool = False,
+                                   lighting: str | None = None
                                    ) -> tuple[dict[str, TrainedModel], dict]:
     """Teach (auto) and acquire the NN1 and NN2 grids once, then train every system on them.
 
     Returns the trained models by system name, and what the shared acquisition cost
-    (``acquire_seconds``, ``images``). ``hil``: through the real drivers (module docstring).
+    (``acquire_seconds``, ``images``) and its light (``lighting``, the preset). ``hil``:
+    through the real drivers (module docstring); ``lighting``: the default scene under this
+    lighting preset (a cell taught in the light it works in; None: the default scene's).
     """
-    train_cfg = default_scene_config(config)
+    train_cfg = with_lighting(default_scene_config(config), lighting)
     with device_opener(hil)(train_cfg, seed=seed) as devices:
         fp = FinePositioner(devices, train_cfg, state_dir=work_dir)
         fp.teach_auto()
@@ -93,7 +98,8 @@ def train_systems_on_default_scene(systems: Sequence[str], config, work_dir: Pat
         nn2 = fp.acquire("nn2", progress=progress)
         acquire_seconds = time.perf_counter() - t0
         models = {system: fp.train(system) for system in systems}
-    return models, {"acquire_seconds": acquire_seconds, "images": len(nn1) + len(nn2)}
+    return models, {"acquire_seconds": acquire_seconds, "images": len(nn1) + len(nn2),
+                    "lighting": train_cfg.scene.lighting.preset}
 
 
 def rezeroed_on(model: TrainedModel, config, work_dir: Path, seed: int, hil: bool = False
@@ -226,13 +232,18 @@ def cell_kind(config) -> str:
 def evaluate(system: str, config, *, trials: int, seed: int, lighting: str | None = None,
              model_path: str | Path | None = None, work_dir: str | Path | None = None,
              grasp: bool = True, log=None, progress: bool = True, hil: bool = False,
-             recorder=None, rezero: bool = False) -> dict:
+             recorder=None, rezero: bool = False, teach_lighting: str | None = None) -> dict:
     """The ``finepos evaluate`` report (see the README for its fields); ``hil``: through the
     real drivers and the device emulators (see the module docstring); ``recorder``: records
     the trials' looks (see ``run_trials``); ``rezero``: the model is first re-zeroed in the
-    trials' light (``rezeroed_on``; the report's ``rezero`` says what moved)."""
+    trials' light (``rezeroed_on``; the report's ``rezero`` says what moved);
+    ``teach_lighting``: teach-in, acquisition and training under this lighting preset instead
+    of the default scene's (not with ``model_path``)."""
     if system not in SYSTEMS:
         raise FineposError(f"unknown system {system!r} (one of {', '.join(SYSTEMS)})")
+    if teach_lighting is not None and model_path is not None:
+        raise FineposError("teach lighting: the model is trained already (not with a model "
+                           "file)")
     eval_cfg = with_test_camera(with_lighting(config, lighting))
     with tempfile.TemporaryDirectory(prefix="finepos-eval-") as tmp:
         work = Path(work_dir or tmp)
@@ -242,10 +253,11 @@ def evaluate(system: str, config, *, trials: int, seed: int, lighting: str | Non
             if taught is not None and taught != cell_kind(config):
                 raise FineposError(f"{model_path}: taught on the {taught}, not the "
                                    f"{cell_kind(config)} (name the part with --part)")
-            acquisition = {"acquire_seconds": None, "images": model.train_images}
+            acquisition = {"acquire_seconds": None, "images": model.train_images,
+                           "lighting": None}
         else:
             model, acquisition = train_on_default_scene(system, config, work / "train", seed,
-                                                        progress, hil)
+                                                        progress, hil, teach_lighting)
         rezero_report = None
         if rezero:
             model, rezero_report = rezeroed_on(model, eval_cfg, work / "rezero", seed, hil)
@@ -278,6 +290,7 @@ def build_report(system: str, config, eval_cfg, *, trials: int, seed: int,
         "train_images": model.train_images,
         "train_seconds": model.train_seconds,
         "acquire_seconds": acquisition["acquire_seconds"],
+        "teach_lighting": acquisition.get("lighting"),
         "feature_count": model.feature_count,
         "seconds_per_loop": (statistics.median(run["seconds_per_iteration"])
                              if run["seconds_per_iteration"] else None),
