@@ -95,8 +95,9 @@ def run_parts_table(config, *, system: str = "gabor", trials: int, seed: int,
             instead of the default scene's (each row's ``teach_lighting``).
 
     Returns:
-        ``{"system", "trials", "seed", "wall_seconds", "rows": [...]}``: one ``finepos
-        evaluate`` report per (part, lighting), part-major, each with ``part`` and ``lighting``.
+        ``{"system", "trials", "seed", "scene", "teach_lighting", "wall_seconds", "rows":
+        [...]}``: one ``finepos evaluate`` report per (part, lighting), part-major, each with
+        ``part`` and ``lighting``.
 
     Raises:
         FineposError: an unknown system or part, or no trials.
@@ -132,7 +133,7 @@ def run_parts_table(config, *, system: str = "gabor", trials: int, seed: int,
     logger.info("parts table: %d parts x %d lightings x %d trials in %.1f s", len(part_names),
                 len(lightings), trials, wall)
     return {"system": system, "trials": trials, "seed": seed, "scene": config.source,
-            "wall_seconds": wall, "rows": rows}
+            "teach_lighting": teach_lighting, "wall_seconds": wall, "rows": rows}
 
 
 def _rate(row: dict, budget: str) -> str:
@@ -174,8 +175,11 @@ def parts_markdown(report: dict) -> str:
                  + [_loops(row)])
         lines.append("| " + " | ".join(cells) + " |")
     lines.append("")
+    taught = report.get("teach_lighting")
+    taught = f", taught in {taught} light" if taught else ""
     lines.append(f"{report['system']}, {report['trials']} trials per row, seed {report['seed']}, "
-                 f"scene {report['scene']}; safe: within {SAFE_MM:g} mm and {SAFE_DEG:g} deg of "
+                 f"scene {report['scene']}{taught}; safe: within {SAFE_MM:g} mm and {SAFE_DEG:g} "
+                 "deg of "
                  "the grasp pose; "
                  f"{report['wall_seconds']:.0f} s in all.")
     return "\n".join(lines) + "\n"

@@ -49,7 +49,9 @@ def test_the_table_has_a_row_per_part_and_light_with_intervals():
     ci = wilson(19, 20)
     assert f"95% ({ci['low'] * 100:.0f}-{ci['high'] * 100:.0f})" in body[0]
     assert "0.05 / 0.06 / 0.40" in body[0] and "| 1 / never, 1 never |" in body[0]
-    assert "gabor, 20 trials per row, seed 3" in table
+    assert "gabor, 20 trials per row, seed 3, scene <defaults>; safe" in table
+    assert "scene <defaults>, taught in poor light; safe" in \
+        parts_markdown({**report, "teach_lighting": "poor"})
 
 
 def test_a_rate_short_of_all_is_not_rounded_up_to_100():
