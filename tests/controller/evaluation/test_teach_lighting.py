@@ -9,9 +9,7 @@ import pytest
 
 from controller import cli
 from controller.evaluation import trials
-
-SMALL_GRIDS = {"controller": {"acquisition": {"nn1": {"shape": [3, 3, 3]},
-                                              "nn2": {"shape": [3, 3, 3]}}}}
+from tests.controller.evaluation.test_parts_table import SMALL_GRIDS
 
 
 @pytest.mark.parametrize("extra,message", [
