@@ -29,6 +29,7 @@ COMMAND_MODULES = (
     "controller.commands.table1",
     "controller.commands.filter_search",
     "controller.commands.check",
+    "controller.commands.compare",
     "controller.commands.fit_timing",
     "controller.commands.grasp_sweep",
     "controller.commands.replay",

@@ -50,7 +50,6 @@ from __future__ import annotations
 import argparse
 import json
 import sys
-from pathlib import Path
 
 from controller.commands.common import (
     ALL_PARTS,
@@ -104,7 +103,7 @@ def run(args) -> int:
             log.close()
     trial_states = report.pop("_trial_states")
     if args.states:
-        Path(args.states).write_text(json.dumps(trial_states))
+        atomic_write_text(args.states, json.dumps(trial_states))
     write_json(args.json, report)
     return 0
 
