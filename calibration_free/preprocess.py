@@ -127,3 +127,12 @@ def normalise(gray: np.ndarray, stats: IntensityStats) -> np.ndarray:
         return np.full(gray.shape, stats.mean, dtype=np.float32)
     scale = stats.std / s
     return cv2.addWeighted(gray, scale, gray, 0.0, stats.mean - m * scale, dtype=cv2.CV_32F)
+
+
+def mean_frame(images: list[np.ndarray]) -> np.ndarray:
+    """The pixel-wise mean of frames of one size (uint8, rounded): where the arm stands still
+    only the camera's noise differs between them (a settling look, a re-zero)."""
+    total = np.zeros(images[0].shape, np.uint32)
+    for image in images:
+        total += image
+    return ((total + len(images) // 2) // len(images)).astype(np.uint8)

@@ -32,6 +32,7 @@ from typing import Any, Literal, Protocol
 import cv2
 import numpy as np
 
+from calibration_free.preprocess import mean_frame
 from controller.loop.iteration_log import IterationLog
 from controller.loop.record import IterationRecord, LoopKind
 from controller.systems.estimator import Estimator, TranslationEstimate, corrective_step
@@ -505,12 +506,3 @@ class PositioningLoop:
         if self.recorder is not None and self._look is not None:
             frame, estimate, estimator, error_at_look = self._look
             self.recorder.look(record, frame, estimate, estimator, error_at_look)
-
-
-def mean_frame(images: list[np.ndarray]) -> np.ndarray:
-    """The pixel-wise mean of frames of one size (uint8, rounded): the arm stands still, so
-    only the camera's noise differs between them."""
-    total = np.zeros(images[0].shape, np.uint32)
-    for image in images:
-        total += image
-    return ((total + len(images) // 2) // len(images)).astype(np.uint8)

@@ -8,8 +8,9 @@ import math
 import numpy as np
 import pytest
 
+from calibration_free.preprocess import mean_frame
 from controller.loop.iteration_log import IterationLog, read_log
-from controller.loop.positioning import LoopConfig, PositioningLoop, mean_frame
+from controller.loop.positioning import LoopConfig, PositioningLoop
 from controller.systems.estimator import TranslationEstimate
 from drivers.core.errors import MotionRejectedError
 from drivers.core.pose import ToolStep, wrap_deg
