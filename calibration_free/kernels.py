@@ -213,11 +213,12 @@ def _colour_sums(lin: np.ndarray, core: np.ndarray, ring: np.ndarray, i0: int, i
 
 
 @njit("UniTuple(float64, 3)(uint8[:, :, :], uint8[:, :], uint8[:, :], uint8[:, :], "
-      "uint8[:, :], float64[::1], float64, float32[:, ::1])", cache=True, nogil=True,
+      "uint8[:, :], float64[::1], float64, float64, float32[:, ::1])", cache=True, nogil=True,
       error_model="numpy")
 def colour_coverage_moments(rgb: np.ndarray, blob: np.ndarray, core: np.ndarray,
                             band: np.ndarray, ring: np.ndarray, linear: np.ndarray,
-                            min_contrast: float, weights: np.ndarray):  # pragma: no cover
+                            min_contrast: float, local_contrast: float,
+                            weights: np.ndarray):  # pragma: no cover
     """Moments (weight, sum of u * weight, sum of v * weight; window coordinates) of the
     part's coverage read from each pixel's colour (``localise.colour_centre``): 1 in ``core``;
     in the rest of ``band``, with the pixel's linear colour p = alpha * c + beta * b (c the
@@ -227,10 +228,13 @@ def colour_coverage_moments(rgb: np.ndarray, blob: np.ndarray, core: np.ndarray,
     the mean of 1 - beta and alpha / |f| (the part's share); 0 elsewhere. ``linear`` maps
     grey levels to linear light. The weight is not cut to 0..1 (the camera's noise around the
     part's edge would then only add to it, most where the background is dark, and move the
-    centre that way), only kept within -1..2. Where the background's colour has less than
-    ``min_contrast`` across the part's direction (a part of the table's colour) nothing is
-    read: all zero. ``weights`` (the window's size) receives each pixel's weight (0 off the
-    band; undefined where all zero is returned)."""
+    centre that way), only kept within -1..2. Where the background's mean colour has less
+    than ``min_contrast`` across the part's direction (a part of the table's colour) nothing
+    is read: all zero. Where only the background around one pixel has less than
+    ``local_contrast`` (a black cast shadow: its colour cannot be told from the part's) that
+    pixel reads the part's share alone: the light it has is the part's. ``weights`` (the
+    window's size) receives each pixel's weight (0 off the band; undefined where all zero is
+    returned)."""
     height, width = core.shape
     lin = np.empty((height, width, 3))
     for i in range(height):
@@ -244,6 +248,15 @@ def colour_coverage_moments(rgb: np.ndarray, blob: np.ndarray, core: np.ndarray,
         return 0.0, 0.0, 0.0
     fg0 /= n_in
     bg0 /= n_out
+    norm0 = np.sqrt(fg0[0] * fg0[0] + fg0[1] * fg0[1] + fg0[2] * fg0[2])
+    if norm0 <= 0.0:
+        return 0.0, 0.0, 0.0
+    cb0 = bb0 = 0.0
+    for k in range(3):
+        cb0 += fg0[k] / norm0 * bg0[k]
+        bb0 += bg0[k] * bg0[k]
+    if not bb0 - cb0 * cb0 >= min_contrast * min_contrast:
+        return 0.0, 0.0, 0.0
     fg = np.empty(3)
     bg = np.empty(3)
     m00 = m10 = m01 = 0.0
@@ -276,8 +289,16 @@ def colour_coverage_moments(rgb: np.ndarray, blob: np.ndarray, core: np.ndarray,
                     pb += p * bg[k]
                     bb += bg[k] * bg[k]
                 across = bb - cb * cb
-                if not across >= min_contrast * min_contrast:
-                    return 0.0, 0.0, 0.0
+                if not across >= local_contrast * local_contrast:
+                    # the table around is too dark for its colour to be told from the
+                    # part's (the part's own cast shadow): what light the pixel has is the
+                    # part's, so its share is the part's own
+                    w = min(max(pc / norm, -1.0), 2.0)
+                    weights[i, j] = w
+                    m00 += w
+                    m10 += w * j
+                    m01 += w * i
+                    continue
                 beta = (pb - cb * pc) / across
                 w = 1.0 - beta
                 if not blob[i, j]:

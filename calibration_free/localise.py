@@ -220,10 +220,15 @@ _KERNEL_7 = np.ones((7, 7), np.uint8)
 # ``perception.camera_gamma``).
 DEFAULT_CAMERA_GAMMA = 2.2
 
-# The background's colour must differ from the part's by this much across the part's colour
-# (linear light, 0..1) for ``colour_centre`` to read a pixel's share of it: a part of the
-# table's colour has none, and the grey-level coverage is read instead.
+# The background's colour (the mean around the blob) must differ from the part's by this
+# much across the part's colour (linear light, 0..1) for ``colour_centre`` to read a pixel's
+# share of it: a part of the table's colour has none, and the grey-level coverage is read
+# instead.
 MIN_COLOUR_CONTRAST = 0.002
+# Where the table just around one edge pixel has less than this (a cast shadow so dark that
+# its colour cannot be told from the part's), that pixel reads the part's own share
+# (``kernels.colour_coverage_moments``) instead of the whole frame falling back to grey levels.
+LOCAL_COLOUR_CONTRAST = 0.002
 
 
 @dataclass(frozen=True)
@@ -270,7 +275,10 @@ def colour_centre(image: np.ndarray, edge: ColourEdge, u_px: float, v_px: float,
     the blob, where a pixel is mostly table, a cast shadow whose edge runs along the part's
     can darken the table next to the part below what the ring shows; there the part's own
     share (alpha over the part's brightness just inside) is averaged in
-    (``kernels.colour_coverage_moments``). The band read runs from a pixel inside the
+    (``kernels.colour_coverage_moments``); where the table just around a pixel is too dark
+    for its colour to be told from the part's (``LOCAL_COLOUR_CONTRAST``: the part's own
+    black cast shadow), the pixel's light is the part's alone and its share is read from
+    that. The band read runs from a pixel inside the
     blob's outline to one outside it (the blob's threshold cuts the edge's ramp near its
     middle).
 
@@ -295,7 +303,7 @@ def colour_centre(image: np.ndarray, edge: ColourEdge, u_px: float, v_px: float,
     m00, m10, m01 = colour_coverage_moments(
         image[y0:y1, x0:x1], blob, cv2.erode(blob, _KERNEL_3), band,
         cv2.subtract(cv2.dilate(blob, _KERNEL_5), band), edge.linear, MIN_COLOUR_CONTRAST,
-        weights)
+        LOCAL_COLOUR_CONTRAST, weights)
     if not m00 > 0:
         return None
     return x0 + m10 / m00, y0 + m01 / m00, (x0, y0, weights)

@@ -10,6 +10,7 @@ from calibration_free.axis import axis_of
 from calibration_free.front_end import FrontEnd
 from calibration_free.kernels import colour_coverage_moments, saturation_image
 from calibration_free.localise import (
+    LOCAL_COLOUR_CONTRAST,
     MIN_COLOUR_CONTRAST,
     ColourEdge,
     colour_centre,
@@ -39,6 +40,18 @@ def square_frame(u0: float, v0: float, *, lit: float = 1.6, dark: float = 0.15,
     shade = dark + (lit - dark) * (1 - t) ** 3 + 0.3 * (1 - np.abs(2 * t - 1))
     return _camera(np.stack([np.where(inside, c * shade, table) for c in part], axis=-1),
                    gamma, noise)
+
+
+def shadowed_frame(u0: float, v0: float, *, shadow_px: float = 4.0, noise: float = 0.0
+                   ) -> np.ndarray:
+    """``square_frame``'s part evenly lit, with a black cast shadow ``shadow_px`` wide along
+    its right edge (a low lamp from the left on a part taller than it is wide)."""
+    half = 15.0
+    x, y = _samples()
+    inside = (np.abs(x - u0) <= half) & (np.abs(y - v0) <= half)
+    shadow = (x > u0 + half) & (x <= u0 + half + shadow_px) & (np.abs(y - v0) <= half + 2)
+    table = np.where(shadow, 0.0, 0.2)
+    return _camera(np.stack([np.where(inside, c, table) for c in YELLOW], axis=-1), 2.2, noise)
 
 
 def _samples() -> tuple[np.ndarray, np.ndarray]:
@@ -101,6 +114,18 @@ def test_with_localise_and_the_frame_the_colour_centre_is_taken():
     assert centroid == pytest.approx((loc.u_px, loc.v_px), abs=1e-4)
 
 
+@pytest.mark.parametrize(("u0", "v0"), [(60.3, 45.7), (63.62, 48.15)])
+def test_a_black_cast_shadow_beside_the_part_keeps_the_colour_edge(u0, v0):
+    # the table around the shadow's pixels is too dark for its colour to be told from the
+    # part's: those pixels read the part's own share, and the rest of the edge its colour
+    _, grey, colour = _centres(shadowed_frame(u0, v0))
+    assert colour is not None
+    assert abs(colour[0] - u0) < 0.1 and abs(colour[1] - v0) < 0.05
+    # the grey levels read the dark shadow's noise-free saturation ramp as more part
+    # on one of the two places; the colour edge does not
+    assert abs(colour[0] - u0) <= abs(grey[0] - u0) + 0.01
+
+
 def test_a_part_of_the_tables_colour_falls_back_to_grey_levels():
     # a grey part brighter than a grey table: no colour tells them apart
     image = square_frame(60.3, 45.7, part=(0.5, 0.5, 0.5), lit=1.0, dark=1.0)
@@ -113,10 +138,14 @@ def test_a_part_of_the_tables_colour_falls_back_to_grey_levels():
     assert (fallback.u_px, fallback.v_px) == pytest.approx((loc.u_px, loc.v_px), abs=1e-9)
 
 
-def _reference_colour_moments(rgb, blob, core, band, ring, linear, min_contrast):
+def _reference_colour_moments(rgb, blob, core, band, ring, linear, min_contrast,
+                              local_contrast):
     """The kernel's formula in numpy, one pixel at a time: its moments and weights."""
     lin = linear[rgb]
     fg0, bg0 = lin[core > 0].mean(axis=0), lin[ring > 0].mean(axis=0)
+    c0 = fg0 / np.linalg.norm(fg0)
+    if bg0 @ bg0 - (c0 @ bg0) ** 2 < min_contrast ** 2:
+        return (0.0, 0.0, 0.0), np.zeros(core.shape)
     height, width = core.shape
     m = np.zeros(3)
     weights = np.zeros(core.shape)
@@ -132,14 +161,15 @@ def _reference_colour_moments(rgb, blob, core, band, ring, linear, min_contrast)
                 bg = lin[ys, xs][near_ring].mean(axis=0) if near_ring.any() else bg0
                 c = fg / np.linalg.norm(fg)
                 across = bg @ bg - (c @ bg) ** 2
-                if across < min_contrast ** 2:
-                    return (0.0, 0.0, 0.0), weights
                 p = lin[i, j]
-                beta = (p @ bg - (c @ bg) * (p @ c)) / across
-                w = 1.0 - beta
-                if not blob[i, j]:
-                    w = 0.5 * (w + (p @ c - beta * (c @ bg)) / np.linalg.norm(fg))
-                w = float(np.clip(w, -1.0, 2.0))
+                if across < local_contrast ** 2:  # a black shadow around: the part's share
+                    w = float(np.clip(p @ c / np.linalg.norm(fg), -1.0, 2.0))
+                else:
+                    beta = (p @ bg - (c @ bg) * (p @ c)) / across
+                    w = 1.0 - beta
+                    if not blob[i, j]:
+                        w = 0.5 * (w + (p @ c - beta * (c @ bg)) / np.linalg.norm(fg))
+                    w = float(np.clip(w, -1.0, 2.0))
             else:
                 continue
             weights[i, j] = w
@@ -147,8 +177,10 @@ def _reference_colour_moments(rgb, blob, core, band, ring, linear, min_contrast)
     return tuple(m), weights
 
 
-def test_colour_coverage_moments_match_the_numpy_formula():
-    image = square_frame(60.3, 45.7, noise=3.0)
+@pytest.mark.parametrize("shadow", [False, True])
+def test_colour_coverage_moments_match_the_numpy_formula(shadow):
+    image = (shadowed_frame(60.3, 45.7, noise=3.0) if shadow
+             else square_frame(60.3, 45.7, noise=3.0))
     loc, _, _ = _centres(image)
     window = (slice(20, 75), slice(35, 90))
     blob = loc.part_mask[window]
@@ -158,14 +190,16 @@ def test_colour_coverage_moments_match_the_numpy_formula():
     linear = ColourEdge(2.2).linear
     weights = np.full(blob.shape, np.nan, np.float32)
     got = colour_coverage_moments(image[window], blob, core, band, ring, linear,
-                                  MIN_COLOUR_CONTRAST, weights)
+                                  MIN_COLOUR_CONTRAST, LOCAL_COLOUR_CONTRAST, weights)
     want, want_weights = _reference_colour_moments(image[window], blob, core, band, ring,
-                                                   linear, MIN_COLOUR_CONTRAST)
+                                                   linear, MIN_COLOUR_CONTRAST,
+                                                   LOCAL_COLOUR_CONTRAST)
     np.testing.assert_allclose(got, want, rtol=1e-9)
     np.testing.assert_allclose(weights, want_weights, rtol=1e-6, atol=1e-6)
     empty = np.zeros_like(core)
     assert colour_coverage_moments(image[window], blob, empty, band, ring, linear,
-                                   MIN_COLOUR_CONTRAST, weights) == (0.0, 0.0, 0.0)
+                                   MIN_COLOUR_CONTRAST, LOCAL_COLOUR_CONTRAST,
+                                   weights) == (0.0, 0.0, 0.0)
 
 
 @pytest.mark.parametrize("gamma", [0.5, 3.5, True, "2.2"])
