@@ -34,6 +34,7 @@ from calibration_free.errors import TrainingError
 from calibration_free.perception import Perception
 from calibration_free.pin import pinned
 from calibration_free.pin import whole as seen_whole_part
+from calibration_free.preprocess import mean_frame
 
 # A reading at the taught pose beyond these is not a change of light (a quarter pixel is about
 # 0.25 mm): the part is not where it was taught, or the camera was knocked.
@@ -49,7 +50,8 @@ MIN_FOUND_SHARE = 0.75
 class Rezeroed:
     """A re-zeroed model and what moved: each translation net's mean reading at the taught
     pose before (mm), NN2's (deg; None where an axis map reads the turn there) and whether NN2
-    was turned back by it, and how many frames were used of how many taken."""
+    was turned back by it, how many frames were used of how many taken, and how many the
+    nets read at a time (their mean frame)."""
 
     bundle: ModelBundle
     shift_mm: dict[str, tuple[float, float]]
@@ -57,6 +59,7 @@ class Rezeroed:
     nn2_turned: bool
     frames_used: int
     frames: int
+    average: int = 1
 
     def report(self) -> dict:
         """JSON-able: the shifts (rounded to a micrometre, a thousandth of a degree) and the
@@ -64,12 +67,19 @@ class Rezeroed:
         return {"shift_mm": {k: [round(v, 3) for v in s] for k, s in self.shift_mm.items()},
                 "nn2_deg": None if self.nn2_deg is None else round(self.nn2_deg, 3),
                 "nn2_turned": self.nn2_turned,
-                "frames_used": self.frames_used, "frames": self.frames}
+                "frames_used": self.frames_used, "frames": self.frames,
+                "average": self.average}
 
 
-def rezero(bundle: ModelBundle, images: Sequence[np.ndarray]) -> Rezeroed:
+def rezero(bundle: ModelBundle, images: Sequence[np.ndarray], average: int = 1) -> Rezeroed:
     """The bundle with its translation nets reading zero on ``images`` (frames at the taught
     pose in the cell's light); its ``training`` metadata records the shift.
+
+    ``average``: the nets read the frames' means (``preprocess.mean_frame``) in consecutive
+    groups of this many (the last one may be smaller), as the loop's settling look reads its
+    step on the mean of ``settle_frames`` frames: in a dark frame the camera's noise moves
+    what the nets read, so a zero read on single frames sits off the one the loop reads
+    (README "Re-zero in the cell's light"). The seen-whole share counts groups.
 
     Raises:
         TrainingError: the part is seen whole in too few frames, or the nets read more than
@@ -77,10 +87,16 @@ def rezero(bundle: ModelBundle, images: Sequence[np.ndarray]) -> Rezeroed:
         ImageError: a frame of the wrong size or type.
     """
     require_frames(images)
+    if isinstance(average, bool) or not isinstance(average, int) or average < 1:
+        raise TrainingError(f"rezero: average must be a whole number >= 1, got {average!r}")
+    frames = len(images)
+    if average > 1:
+        images = [mean_frame(list(images[i:i + average])) for i in range(0, frames, average)]
     perception = Perception(bundle)
     percepts = [perception.perceive(image) for image in images]
     whole = [i for i, p in enumerate(percepts) if seen_whole_part(p)]
-    require_seen_whole(len(whole), len(images))
+    used = sum(min(average, frames - i * average) for i in whole)
+    require_seen_whole(used, frames)
     nn2_deg, turned = None, False
     if bundle.axis is None:  # NN2 first: the translation nets read its (sin, cos)
         kappa = bundle.kappa
@@ -93,7 +109,7 @@ def rezero(bundle: ModelBundle, images: Sequence[np.ndarray]) -> Rezeroed:
                 math.radians(kappa * nn2_deg)))
     shifted, shift = pinned(bundle, [images[i] for i in whole],
                             check=lambda mm: require_near_shift("the model", mm))
-    result = Rezeroed(shifted, shift, nn2_deg, turned, len(whole), len(images))
+    result = Rezeroed(shifted, shift, nn2_deg, turned, used, frames, average)
     history = [*bundle.training.get("rezero", []), result.report()]
     return dataclasses.replace(result, bundle=dataclasses.replace(
         shifted, training={**bundle.training, "rezero": history}))

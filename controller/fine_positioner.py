@@ -210,7 +210,9 @@ class FinePositioner:
                ) -> tuple[TrainedModel, dict]:
         """Re-zero the part's model of ``system`` in the cell's light: move to the taught
         pose, take ``frames`` frames, move the model's zero there (Gabor: shift the
-        translation nets, ``calibration_free.rezero``; the image-alignment servo: take its
+        translation nets, ``calibration_free.rezero``, read on the frames' means as the
+        loop's settling look reads, ``controller.loop.settle_frames`` at a time where
+        ``settle_average`` is ``frames``; the image-alignment servo: take its
         template again, ``calibration_free.baselines.align.rezero``), store the model
         (atomically) and use it. The part must lie where it was taught.
 
@@ -236,7 +238,9 @@ class FinePositioner:
             done = rezero_align(model.model, images)
             moved = done.model
         else:
-            done = rezero(model.model, images)
+            loop = self.config.controller.loop
+            done = rezero(model.model, images,
+                          average=loop.settle_frames if loop.settle_average == "frames" else 1)
             moved = done.bundle
         model = dataclasses.replace(model, model=moved)
         report = done.report()

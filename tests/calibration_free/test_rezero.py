@@ -15,6 +15,7 @@ import pytest
 from calibration_free.bundle import ModelBundle
 from calibration_free.errors import TrainingError
 from calibration_free.perception import Perception
+from calibration_free.preprocess import mean_frame
 from calibration_free.rezero import MAX_SHIFT_MM, NN2_MIN_DEG, rezero
 from calibration_free.synthetic import render
 
@@ -124,3 +125,22 @@ def test_a_part_not_seen_whole_changes_nothing(saturation_bundle, cell):
         rezero(saturation_bundle, carded)
     with pytest.raises(TrainingError, match="no frames"):
         rezero(saturation_bundle, [])
+
+
+def test_the_zero_is_read_on_the_frames_means_as_the_settling_look_reads(saturation_bundle,
+                                                                         cell):
+    moved = at_pose(cell, 8, SHIFT_PX)
+    done = rezero(saturation_bundle, moved, average=3)
+    # read on the means of frames 0-2, 3-5 and 6-7: what the nets read on those mean frames
+    means = [mean_frame(moved[i:i + 3]) for i in (0, 3, 6)]
+    assert np.allclose(done.shift_mm["nn1"], readings(saturation_bundle, means)["nn1_mm"])
+    assert (done.frames_used, done.frames, done.average) == (8, 8, 3)
+    assert done.report()["average"] == 3
+    assert all(np.hypot(*v) < 0.05 for v in readings(done.bundle, means).values())
+    # one mean frame without the part: its three frames are not used, and 5 of 8 is too few
+    bare = np.full_like(moved[0], moved[0][0, 0])
+    with pytest.raises(TrainingError, match="seen whole in only 5 of 8 frames"):
+        rezero(saturation_bundle, [*moved[:3], bare, bare, bare, *moved[6:]], average=3)
+    for bad in (0, -1, 1.5, True):
+        with pytest.raises(TrainingError, match="average must be a whole number"):
+            rezero(saturation_bundle, moved, average=bad)
