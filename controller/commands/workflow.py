@@ -226,10 +226,12 @@ def register(subparsers) -> None:
         description="Example: finepos rezero\n\nAfter the light changed (a lamp moved, the "
                     "room dimmed): with the part where it was taught, move to the taught "
                     "pose, take --frames frames and shift the translation nets to read zero "
-                    f"there, and turn NN2 back where it reads {NN2_MIN_DEG:g} deg or more "
-                    "there (the Gabor model in the part's state folder, rewritten "
-                    "atomically; no new acquisition; --system align: take the servo's "
-                    f"template again there). A reading over {MAX_SHIFT_MM:g} mm or "
+                    "there (on the frames' means, controller.loop.settle_frames at a time, as "
+                    "the loop's settling look reads), and turn NN2 back where it reads "
+                    f"{NN2_MIN_DEG:g} deg or more there (the Gabor model in the part's "
+                    "state folder, rewritten atomically; no new acquisition; --system "
+                    "align: take the servo's template again there). A reading over "
+                    f"{MAX_SHIFT_MM:g} mm or "
                     f"{MAX_TURN_DEG:g} deg there is refused: the part is not where it was "
                     "taught, or the camera moved.")
     add_config_option(p)
