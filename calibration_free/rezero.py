@@ -79,7 +79,8 @@ def rezero(bundle: ModelBundle, images: Sequence[np.ndarray], average: int = 1) 
     groups of this many (the last one may be smaller), as the loop's settling look reads its
     step on the mean of ``settle_frames`` frames: in a dark frame the camera's noise moves
     what the nets read, so a zero read on single frames sits off the one the loop reads
-    (README "Re-zero in the cell's light"). The seen-whole share counts groups.
+    (README "Re-zero in the cell's light"). A mean that does not show the part whole
+    leaves all its frames out of the seen-whole share.
 
     Raises:
         TrainingError: the part is seen whole in too few frames, or the nets read more than
