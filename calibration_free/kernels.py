@@ -293,18 +293,15 @@ def colour_coverage_moments(rgb: np.ndarray, blob: np.ndarray, core: np.ndarray,
                     # the table around is too dark for its colour to be told from the
                     # part's (the part's own cast shadow): what light the pixel has is the
                     # part's, so its share is the part's own
-                    w = min(max(pc / norm, -1.0), 2.0)
-                    weights[i, j] = w
-                    m00 += w
-                    m10 += w * j
-                    m01 += w * i
-                    continue
-                beta = (pb - cb * pc) / across
-                w = 1.0 - beta
-                if not blob[i, j]:
-                    # mostly table: a shadow's edge along the part's darkens the table here
-                    # below what the ring shows, which the table's share alone reads as part
-                    w = 0.5 * (w + (pc - beta * cb) / norm)
+                    w = pc / norm
+                else:
+                    beta = (pb - cb * pc) / across
+                    w = 1.0 - beta
+                    if not blob[i, j]:
+                        # mostly table: a shadow's edge along the part's darkens the table
+                        # here below what the ring shows, which the table's share alone
+                        # reads as part
+                        w = 0.5 * (w + (pc - beta * cb) / norm)
                 # far beyond 0..1 is no mix of the two colours (a glint, a speck): bounded so
                 # that one such pixel cannot move the centre; within, the noise stays unbiased
                 w = min(max(w, -1.0), 2.0)
