@@ -178,9 +178,7 @@ def parts_markdown(report: dict) -> str:
     taught = report.get("teach_lighting")
     taught = f", taught in {taught} light" if taught else ""
     lines.append(f"{report['system']}, {report['trials']} trials per row, seed {report['seed']}, "
-                 f"scene {report['scene']}{taught}; safe: within {SAFE_MM:g} mm and {SAFE_DEG:g} "
-                 "deg of "
-                 "the grasp pose; "
-                 f"{report['wall_seconds']:.0f} s in all.")
+                 f"scene {report['scene']}{taught}; safe: within {SAFE_MM:g} mm and "
+                 f"{SAFE_DEG:g} deg of the grasp pose; {report['wall_seconds']:.0f} s in all.")
     return "\n".join(lines) + "\n"
 
