@@ -31,7 +31,9 @@ def add_leaf(subparsers, name: str, module) -> argparse.ArgumentParser:
     first = doc.splitlines()[0].rstrip(".") if doc else name
     if first[:1].isupper() and not first[1:2].isupper():  # a sentence; --help lists phrases
         first = first[0].lower() + first[1:]
-    parser = subparsers.add_parser(name, help=first, description=example_first(doc),
+    # argparse %-formats a help string (for %(prog)s): a literal percent sign must be doubled
+    parser = subparsers.add_parser(name, help=first.replace("%", "%%"),
+                                   description=example_first(doc),
                                    formatter_class=argparse.RawDescriptionHelpFormatter)
     module.add_arguments(parser)
     parser.set_defaults(func=module.run)
