@@ -25,10 +25,11 @@ def register_group(subparsers, name: str, help_text: str, leaves: dict[str, str]
 
 
 def add_leaf(subparsers, name: str, module) -> argparse.ArgumentParser:
-    """Add subcommand ``name`` from a leaf module: help from its docstring's first line, the
+    """Add subcommand ``name`` from a leaf module: help from its docstring's first sentence, the
     docstring (``Example:`` line first) as description, its ``add_arguments`` and ``run``."""
     doc = (module.__doc__ or "").strip()
-    first = doc.splitlines()[0].rstrip(".") if doc else name
+    # the help is the docstring's first paragraph (a sentence may run over two lines)
+    first = " ".join(doc.split("\n\n")[0].split()).rstrip(".") if doc else name
     if first[:1].isupper() and not first[1:2].isupper():  # a sentence; --help lists phrases
         first = first[0].lower() + first[1:]
     # argparse %-formats a help string (for %(prog)s): a literal percent sign must be doubled

@@ -34,3 +34,5 @@ def test_top_level_help_lists_compare_with_its_percent_sign():
     assert done.returncode == 0, done.stderr[-500:]
     assert "paired 95% intervals" in done.stdout
     assert "Traceback" not in done.stderr
+    # a first sentence running over two docstring lines is listed whole
+    assert "servo (align), in good and poor light" in " ".join(done.stdout.split())
