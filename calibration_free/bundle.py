@@ -5,7 +5,8 @@ execute code; a JSON header; a sha256 over both) of kind ``gabor``. Arrays: the 
 (``nn1.*``, ``nn1_rot.*``, ``nn1_near.*``, ``nn2.*``, see ``NumpyMLP.to_arrays``). JSON:
 object kind, kappa, nominal pose, the front end (``frame_px``, ``intensity``,
 ``localisation``: see ``FrontEnd.to_info``), Gabor configuration, ``near_mm``, the axis map
-(``axis``, or null), training metadata.
+(``axis``, or null), the zero by the tool's heading (``heading_zero``, or null), training
+metadata.
 
 Saving is atomic. Loading returns a new bundle or raises BundleError; it never modifies
 anything, so a failed load leaves the caller's current bundle in place.
@@ -23,14 +24,15 @@ from calibration_free.axis import AxisMap
 from calibration_free.errors import BundleError
 from calibration_free.front_end import FrontEnd
 from calibration_free.gabor import GaborConfig
+from calibration_free.heading_zero import HeadingZero
 from calibration_free.mlp import NumpyMLP
 from calibration_free.model_file import TaughtModel
 from drivers.core.pose import Pose
 from drivers.core.typed_config import from_mapping, to_mapping
 
 KIND = "gabor"
-FORMAT_VERSION = 9  # 2: max_elongation; 3: channel, nominal_uv_px; 4: nn1_rot; 5: nn1_near;
-# 6: axis; 7: axis.ends; 8: axis.silhouette; 9: localisation.edge_fill_holes
+FORMAT_VERSION = 10  # 2: max_elongation; 3: channel, nominal_uv_px; 4: nn1_rot; 5: nn1_near;
+# 6: axis; 7: axis.ends; 8: axis.silhouette; 9: localisation.edge_fill_holes; 10: heading_zero
 POSE_KEYS = ("x_mm", "y_mm", "z_mm", "o_deg", "a_deg", "t_deg")
 
 
@@ -59,6 +61,10 @@ class ModelBundle(TaughtModel):
         axis: for an elongated part, the map from its long axis to the turn near the taught
             pose (``calibration_free.axis``), which takes over from NN2 there; None: NN2
             alone.
+        heading_zero: NN2's zero by the tool's heading in the cell's light
+            (``calibration_free.heading_zero``, made by a re-zero with a heading step; the
+            positioning loop takes it off each full look's turn); None: one zero for every
+            heading.
         training: JSON-able training metadata (loss curves, seconds, sample counts, seed).
         format_version: file format version this bundle follows.
     """
@@ -69,8 +75,9 @@ class ModelBundle(TaughtModel):
     # (near_mm 0), so it perceives as it did; files before version 6 have no axis map, files
     # of version 6 no end map in it (no hidden-end correction: calibration_free.ends), files
     # before version 8 an axis map read on the features' silhouette, files before version 9
-    # a colour edge that reads the rims of the part's holes too.
-    older_versions: ClassVar[tuple[int, ...]] = (4, 5, 6, 7, 8)
+    # a colour edge that reads the rims of the part's holes too, files before version 10 no
+    # zero by heading.
+    older_versions: ClassVar[tuple[int, ...]] = (4, 5, 6, 7, 8, 9)
 
     gabor: GaborConfig
     nn1: NumpyMLP
@@ -79,6 +86,7 @@ class ModelBundle(TaughtModel):
     near_mm: float
     nn2: NumpyMLP
     axis: AxisMap | None = None
+    heading_zero: HeadingZero | None = None
     format_version: int = FORMAT_VERSION
 
     def __post_init__(self) -> None:
@@ -108,6 +116,8 @@ class ModelBundle(TaughtModel):
         if self.axis is not None and (not isinstance(self.axis, AxisMap)
                                       or self.axis.kappa != self.kappa):
             raise BundleError(f"axis: must be an axis map of the part's kappa {self.kappa}")
+        if self.heading_zero is not None and not isinstance(self.heading_zero, HeadingZero):
+            raise BundleError("heading_zero: must be a HeadingZero or None")
         if self.nn2.n_inputs != self.gabor.n_filters or self.nn2.n_outputs != 2:
             raise BundleError(f"nn2: must map {self.gabor.n_filters} features to 2 outputs, "
                               f"has layers {self.nn2.layer_sizes}")
@@ -119,14 +129,17 @@ class ModelBundle(TaughtModel):
 
     def system_info(self) -> dict[str, Any]:
         """The Gabor system's own JSON: the filter-bank configuration (``gabor``), where
-        the near translation net takes over (``near_mm``) and the axis map (``axis``).
+        the near translation net takes over (``near_mm``), the axis map (``axis``) and the
+        zero by heading (``heading_zero``).
 
         Returns:
-            {"gabor": ..., "near_mm": ..., "axis": ...}, merged into the file's JSON by
-            ``to_info``.
+            {"gabor": ..., "near_mm": ..., "axis": ..., "heading_zero": ...}, merged into the
+            file's JSON by ``to_info``.
         """
         return {"gabor": to_mapping(self.gabor), "near_mm": float(self.near_mm),
-                "axis": None if self.axis is None else self.axis.to_info()}
+                "axis": None if self.axis is None else self.axis.to_info(),
+                "heading_zero": None if self.heading_zero is None
+                else self.heading_zero.to_info()}
 
     def arrays(self) -> dict[str, np.ndarray]:
         """The networks' weights as named arrays (what the file stores besides the JSON).
@@ -149,7 +162,10 @@ class ModelBundle(TaughtModel):
         axis = None
         if info["format_version"] >= 6 and info.get("axis") is not None:
             axis = AxisMap.from_info(info["axis"])
+        heading_zero = None
+        if info["format_version"] >= 10 and info.get("heading_zero") is not None:
+            heading_zero = HeadingZero.from_info(info["heading_zero"])
         return cls(**taught, gabor=from_mapping(GaborConfig, info["gabor"], "gabor"),
                    nn1=NumpyMLP.from_arrays(arrays, "nn1"), nn1_rot=nn1_rot,
                    nn1_near=nn1_near, near_mm=near_mm, nn2=NumpyMLP.from_arrays(arrays, "nn2"),
-                   axis=axis, format_version=info["format_version"])
+                   axis=axis, heading_zero=heading_zero, format_version=info["format_version"])

@@ -26,6 +26,7 @@ from controller.systems.base import TrainedModel
 from controller.systems.registry import SYSTEMS
 from controller.teach.acquisition import acquire, grid_for, random_set, transfer
 from controller.teach.cell_state import CellState
+from controller.teach.heading_zero import headings, read_heading_zero
 from drivers.core import parts
 from drivers.core.errors import FineposError
 from drivers.core.pose import Pose
@@ -208,7 +209,9 @@ class FinePositioner:
         self._model = SYSTEMS[system].load(file, state)
         return self._model
 
-    def rezero(self, frames: int = REZERO_FRAMES, system: str = "gabor"
+    def rezero(self, frames: int = REZERO_FRAMES, system: str = "gabor",
+               heading_step_deg: float | None = None,
+               heading_range_deg: tuple[float, float] | None = None
                ) -> tuple[TrainedModel, dict]:
         """Re-zero the part's model of ``system`` in the cell's light: move to the taught
         pose, take ``frames`` frames, move the model's zero there (Gabor: shift the
@@ -218,34 +221,58 @@ class FinePositioner:
         template again, ``calibration_free.baselines.align.rezero``), store the model
         (atomically) and use it. The part must lie where it was taught.
 
+        With ``heading_step_deg`` (Gabor only) NN2 is then also read with the part turned to
+        each heading of ``heading_range_deg`` (the part's turn from its taught heading;
+        default one symmetry period centred on it) in steps of at most that
+        (``controller.teach.heading_zero``: the arm turns the part itself), and the model
+        keeps it as NN2's zero by heading, which the loop takes off each full look's turn. A
+        re-zero without it drops the model's zero by heading.
+
         Returns:
             The model and what moved (the report's ``shift_mm``: each Gabor net's reading
-            before, mm; ``read_mm`` / ``read_deg``: the servo's).
+            before, mm; ``read_mm`` / ``read_deg``: the servo's; ``heading_zero``: NN2's
+            zero by heading, or null).
 
         Raises:
-            FineposError: no model of ``system`` stored, a system that does not re-zero, or
-                ``frames`` below 1.
-            TrainingError: the part is not seen whole there, or not where it was taught (the
-                model file is left as it was).
+            FineposError: no model of ``system`` stored, a system that does not re-zero,
+                ``frames`` below 1, or a heading step for the servo.
+            TrainingError: the part is not seen whole there, or not where it was taught, or a
+                grasp to turn it failed (the model file is left as it was).
         """
         if isinstance(frames, bool) or not isinstance(frames, int) or frames < 1:
             raise FineposError(f"rezero: frames must be a whole number >= 1, got {frames!r}")
         if system not in REZERO_SYSTEMS:
             raise FineposError(f"rezero: the {system} system does not re-zero (only "
                                f"{' and '.join(REZERO_SYSTEMS)})")
+        if heading_step_deg is not None and system != "gabor":
+            raise FineposError(f"rezero: a zero by heading is the gabor system's; the {system} "
+                               "system keeps one zero")
         model = self.load_model(system=system)
+        if heading_step_deg is not None:
+            period = 360.0 / model.model.kappa
+            span = heading_range_deg or (-period / 2.0, period / 2.0)
+            headings(heading_step_deg, span)  # refused before the arm moves
         self.move_to(self.state().nominal_pose)
         images = [self.devices.camera.grab().image for _ in range(frames)]
+        loop = self.config.controller.loop
+        average = loop.settle_frames if loop.settle_average == "frames" else 1
         if system == "align":
             done = rezero_align(model.model, images)
             moved = done.model
         else:
-            loop = self.config.controller.loop
-            done = rezero(model.model, images,
-                          average=loop.settle_frames if loop.settle_average == "frames" else 1)
+            done = rezero(dataclasses.replace(model.model, heading_zero=None), images,
+                          average=average)
             moved = done.bundle
-        model = dataclasses.replace(model, model=moved)
         report = done.report()
+        if system == "gabor":
+            report["heading_zero"] = None
+        if heading_step_deg is not None:
+            estimator = SYSTEMS[system].estimator(dataclasses.replace(model, model=moved))
+            table = read_heading_zero(self, estimator, heading_step_deg, span, frames,
+                                      average)
+            moved = dataclasses.replace(moved, heading_zero=table)
+            report["heading_zero"] = table.to_info()
+        model = dataclasses.replace(model, model=moved)
         SYSTEMS[system].save(model, self.model_path(system))
         self._model = model
         logger.info("re-zeroed %s: %s", self.model_path(system), report)

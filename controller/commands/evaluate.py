@@ -28,7 +28,11 @@ Also: finepos evaluate --part all --lighting poor --rezero --trials 50
 --rezero: after training (or --model), re-zero the model at the taught pose in the trials'
 light, as `finepos rezero` does on a cell whose light changed, then run the trials (the report's
 rezero: what each translation net read there before, mm; --system align: the servo's template
-taken again, and what it read there before).
+taken again, and what it read there before). With --rezero-heading-step DEG the model also
+gets NN2's zero by heading in that light, as `finepos rezero --heading-step` reads it: the arm
+turns the part itself, in steps of at most DEG over one symmetry period centred on its taught
+heading (where the trials' tool ends), and reads NN2 there (the report's
+rezero.heading_zero).
 
 Also: finepos evaluate --lighting poor --teach-lighting poor --trials 50
 
@@ -57,6 +61,7 @@ from controller.commands.common import (
     add_system_option,
     add_timing_option,
     part_name_or_all,
+    positive_float,
     positive_int,
     run_config_from_args,
     run_recorder,
@@ -77,6 +82,11 @@ def run(args) -> int:
     if args.rezero and args.system not in REZERO_SYSTEMS:
         raise ConfigError(f"--rezero: only with --system {' or '.join(REZERO_SYSTEMS)}, not "
                           f"{args.system}")
+    if args.rezero_heading_step is not None and not args.rezero:
+        raise ConfigError("--rezero-heading-step: only with --rezero")
+    if args.rezero_heading_step is not None and args.system != "gabor":
+        raise ConfigError(f"--rezero-heading-step: only with --system gabor (the {args.system} "
+                          "system keeps one zero)")
     if args.rezero and args.mounts is not None:
         raise ConfigError("--rezero: not with --mounts (each camera is trained on its own)")
     if args.teach_lighting and args.model:
@@ -97,7 +107,8 @@ def run(args) -> int:
                               lighting=args.lighting, model_path=args.model,
                               grasp=not args.no_grasp, log=log, progress=not args.quiet,
                               hil=args.hil, recorder=recorder, rezero=args.rezero,
-                              teach_lighting=args.teach_lighting)
+                              teach_lighting=args.teach_lighting,
+                              rezero_heading_step=args.rezero_heading_step)
     finally:
         if log:
             log.close()
@@ -121,7 +132,8 @@ def _evaluate_parts(args, config) -> int:
     report = run_parts_table(config, system=args.system, trials=args.trials, seed=args.seed,
                              lightings=lightings, grasp=not args.no_grasp, workers=args.workers,
                              progress=not args.quiet, rezero=args.rezero,
-                             teach_lighting=args.teach_lighting)
+                             teach_lighting=args.teach_lighting,
+                             rezero_heading_step=args.rezero_heading_step)
     if args.json:
         atomic_write_text(args.json, json.dumps(report, indent=2) + "\n")
         print(f"report: {args.json}", file=sys.stderr)
@@ -173,6 +185,10 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--rezero", action="store_true",
                         help="first re-zero the model at the taught pose in the trials' light "
                              "(finepos rezero; gabor or align)")
+    parser.add_argument("--rezero-heading-step", type=positive_float, metavar="DEG",
+                        help="with --rezero: also NN2's zero by heading, the part turned by "
+                             "the arm in steps of at most DEG (finepos rezero --heading-step; "
+                             "gabor)")
     parser.add_argument("--quiet", action="store_true", help="no progress bars")
     parser.add_argument("--workers", type=positive_int, default=1,
                         help="--part all: parallel processes for the trials (default 1)")

@@ -21,6 +21,7 @@ from controller.commands.common import (
     loop_budget,
     parse_triple,
     part_setup,
+    positive_float,
     run_recorder,
 )
 from controller.commands.device_options import add_device_options, apply_device_options
@@ -99,10 +100,13 @@ def cmd_train(args) -> int:
 def cmd_rezero(args) -> int:
     """Re-zero the part's model (``--system``: gabor or align) at the taught pose in the
     cell's light; print what moved."""
+    if args.heading_range and args.heading_step is None:
+        raise ConfigError("--heading-range: only with --heading-step")
     config, state_dir = _config(args)
     with open_devices(config) as devices:
         fp = FinePositioner(devices, config, state_dir=state_dir)
-        _, report = fp.rezero(args.frames, args.system)
+        _, report = fp.rezero(args.frames, args.system, args.heading_step,
+                              tuple(args.heading_range) if args.heading_range else None)
     write_json(None, {"part": config.controller.part, "system": args.system,
                       "model": str(fp.model_path(args.system)), **report})
     return 0
@@ -233,7 +237,18 @@ def register(subparsers) -> None:
                     "align: take the servo's template again there). A reading over "
                     f"{MAX_SHIFT_MM:g} mm or "
                     f"{MAX_TURN_DEG:g} deg there is refused: the part is not where it was "
-                    "taught, or the camera moved.")
+                    "taught, or the camera moved.\n\n"
+                    "Also: finepos rezero --heading-step 5\n\n"
+                    "--heading-step DEG: then also read NN2's zero by heading (gabor): a lamp "
+                    "at the side lights the part from another side at each heading, and the "
+                    "turn NN2 reads at the taught pose turns with it. The arm grasps the part, "
+                    "turns it, sets it down and reads NN2 from the taught pose turned with it, "
+                    "at headings at most DEG apart over --heading-range FROM TO (the part's "
+                    "turn from its taught heading, deg; default one symmetry period centred "
+                    "on it: -45 45 for the cube), and puts it back; the loop then takes the "
+                    "zero at the tool's heading off each full look's turn. About 7 s a "
+                    "heading; the gripper must be able to grasp the part there. A plain "
+                    "rezero drops the zero by heading (it belongs to the old light).")
     add_config_option(p)
     add_device_options(p)
     add_part_option(p, TAUGHT_PART_HELP)
@@ -242,6 +257,11 @@ def register(subparsers) -> None:
     p.add_argument("--system", default="gabor", choices=REZERO_SYSTEMS,
                    help="the model to re-zero: gabor (the default) or align (the "
                         "image-alignment servo)")
+    p.add_argument("--heading-step", type=positive_float, metavar="DEG",
+                   help="also read NN2's zero by heading, in steps of at most DEG (see above)")
+    p.add_argument("--heading-range", type=float, nargs=2, metavar=("FROM", "TO"),
+                   help="with --heading-step: the part's turns from its taught heading, deg "
+                        "(default: one symmetry period centred on it)")
     p.set_defaults(func=cmd_rezero)
 
     p = add_command(

@@ -52,6 +52,7 @@ class _TrialsJob:
     seed: int
     grasp: bool
     rezero: bool = False
+    rezero_heading_step: float | None = None
 
 
 def _eval_config(config, lighting: str):
@@ -64,7 +65,8 @@ def _run_trials_job(job: _TrialsJob, tick: Tick) -> dict:
     with tempfile.TemporaryDirectory(prefix="finepos-parts-") as tmp:
         model, rezero = job.model, None
         if job.rezero:
-            model, rezero = rezeroed_on(model, config, Path(tmp) / "rezero", job.seed)
+            model, rezero = rezeroed_on(model, config, Path(tmp) / "rezero", job.seed,
+                                        heading_step_deg=job.rezero_heading_step)
         run = run_trials(job.system, model, config, job.trials, job.seed,
                          work_dir=Path(tmp) / "eval", grasp=job.grasp, progress=False,
                          on_trial=tick)
@@ -75,7 +77,8 @@ def run_parts_table(config, *, system: str = "gabor", trials: int, seed: int,
                     part_names: tuple[str, ...] = tuple(parts.PARTS),
                     lightings: tuple[str, ...] = LIGHTINGS, grasp: bool = True,
                     workers: int = 1, progress: bool = True, rezero: bool = False,
-                    teach_lighting: str | None = None) -> dict:
+                    teach_lighting: str | None = None,
+                    rezero_heading_step: float | None = None) -> dict:
     """Train each part once, run every (part, lighting) pair's trials; the JSON report.
 
     Args:
@@ -91,6 +94,8 @@ def run_parts_table(config, *, system: str = "gabor", trials: int, seed: int,
         progress: show progress bars.
         rezero: re-zero each part's model in each pair's light before its trials
             (``trials.rezeroed_on``; each row's ``rezero`` says what moved).
+        rezero_heading_step: with ``rezero``, also its zero by heading in steps of at most
+            this (deg; ``controller.teach.heading_zero``).
         teach_lighting: teach each part, acquire and train under this lighting preset
             instead of the default scene's (each row's ``teach_lighting``).
 
@@ -116,7 +121,7 @@ def run_parts_table(config, *, system: str = "gabor", trials: int, seed: int,
                 system, configs[kind], Path(tmp) / kind, seed, progress,
                 lighting=teach_lighting)
     jobs = [_TrialsJob(kind, light, system, models[kind], configs[kind], trials, seed, grasp,
-                       rezero)
+                       rezero, rezero_heading_step)
             for kind in part_names for light in lightings]
     with open_pool(min(workers, len(jobs))) as pool:
         runs = pool.run(_run_trials_job, jobs, weights=[trials] * len(jobs), desc="parts",

@@ -102,10 +102,14 @@ def train_systems_on_default_scene(systems: Sequence[str], config, work_dir: Pat
                     "lighting": train_cfg.scene.lighting.preset}
 
 
-def rezeroed_on(model: TrainedModel, config, work_dir: Path, seed: int, hil: bool = False
-                ) -> tuple[TrainedModel, dict]:
+def rezeroed_on(model: TrainedModel, config, work_dir: Path, seed: int, hil: bool = False,
+                heading_step_deg: float | None = None) -> tuple[TrainedModel, dict]:
     """The model re-zeroed (``FinePositioner.rezero``) on ``config``'s cell, in its light:
     the part where the scene puts it, the arm at its true grasp pose (``teach_auto``).
+    ``heading_step_deg``: also its zero by heading, in steps of at most that, over the
+    default range, one symmetry period centred on the taught heading: where the trials' tool
+    ends (the simulated cell's grasp pose is the one of the part's symmetric turns nearest the
+    taught one).
 
     Raises:
         FineposError: a system that does not re-zero (``REZERO_SYSTEMS``).
@@ -118,7 +122,7 @@ def rezeroed_on(model: TrainedModel, config, work_dir: Path, seed: int, hil: boo
         fp = FinePositioner(devices, config, state_dir=work_dir)
         fp.teach_auto()
         SYSTEMS[model.system].save(model, fp.model_path(model.system))
-        return fp.rezero(system=model.system)
+        return fp.rezero(system=model.system, heading_step_deg=heading_step_deg)
 
 
 def run_trials(system: str, model: TrainedModel, config, trials: int, seed: int, *,
@@ -232,11 +236,13 @@ def cell_kind(config) -> str:
 def evaluate(system: str, config, *, trials: int, seed: int, lighting: str | None = None,
              model_path: str | Path | None = None, work_dir: str | Path | None = None,
              grasp: bool = True, log=None, progress: bool = True, hil: bool = False,
-             recorder=None, rezero: bool = False, teach_lighting: str | None = None) -> dict:
+             recorder=None, rezero: bool = False, teach_lighting: str | None = None,
+             rezero_heading_step: float | None = None) -> dict:
     """The ``finepos evaluate`` report (see the README for its fields); ``hil``: through the
     real drivers and the device emulators (see the module docstring); ``recorder``: records
     the trials' looks (see ``run_trials``); ``rezero``: the model is first re-zeroed in the
-    trials' light (``rezeroed_on``; the report's ``rezero`` says what moved);
+    trials' light (``rezeroed_on``; the report's ``rezero`` says what moved), with
+    ``rezero_heading_step`` also by heading;
     ``teach_lighting``: teach-in, acquisition and training under this lighting preset instead
     of the default scene's (not with ``model_path``)."""
     if system not in SYSTEMS:
@@ -260,7 +266,8 @@ def evaluate(system: str, config, *, trials: int, seed: int, lighting: str | Non
                                                         progress, hil, teach_lighting)
         rezero_report = None
         if rezero:
-            model, rezero_report = rezeroed_on(model, eval_cfg, work / "rezero", seed, hil)
+            model, rezero_report = rezeroed_on(model, eval_cfg, work / "rezero", seed, hil,
+                                               rezero_heading_step)
         run = run_trials(system, model, eval_cfg, trials, seed, work_dir=work / "eval",
                          grasp=grasp, log=log, progress=progress, hil=hil, recorder=recorder)
     report = build_report(system, config, eval_cfg, trials=trials, seed=seed, model=model,

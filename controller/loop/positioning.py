@@ -188,6 +188,13 @@ class PositioningResult:
         self.reason = self.reason.replace(CARRIED, ", not made (the arm moved before the grasp)")
 
 
+def _less(step: ToolStep, zero: float | None) -> ToolStep:
+    """``step`` with a zero (deg: the turn read at the taught pose) taken off its turn."""
+    if zero is None:
+        return step
+    return dataclasses.replace(step, dphi_deg=step.dphi_deg - zero)
+
+
 def _turn_within_limits(step: ToolStep, arm: Arm) -> ToolStep:
     """The step with its rotation cut to the arm's ``max_step_deg``: a part without symmetry
     (kappa 1) may need a turn of up to 180 deg, which the safety layer rejects as one command;
@@ -324,7 +331,8 @@ class PositioningLoop:
                 kind, cost = "full", 1.0
                 rot = estimator.estimate_rotation(tr)
                 record.estimates.update(rot.record)
-                read = corrective_step(tr, rot)
+                zero = self._heading_zero(estimator, record)
+                read = _less(corrective_step(tr, rot), zero)
                 if expected is not None:
                     record.estimates["turn_expected_deg"] = expected[0]
                     if abs(read.dphi_deg - expected[0]) > expected[1]:
@@ -336,7 +344,7 @@ class PositioningLoop:
                                       f"{expected[0]:.1f} deg expected): the rotation "
                                       "reading does not follow the arm")
                 if cfg.settle_frames > 1 and self._settling(read):
-                    read = self._settle(estimator, read, record, frame.image)
+                    read = self._settle(estimator, read, record, frame.image, zero)
                 step = read if cfg.turn_in_commands else _turn_within_limits(read, self.arm)
             record.commanded = step
             shift = math.hypot(step.dx_mm, step.dy_mm)
@@ -440,19 +448,20 @@ class PositioningLoop:
             and read_mm <= self.config.r_fine_mm and tr.seen_share < 1.0 - share
 
     def _settle(self, estimator: Estimator, first: ToolStep, record: IterationRecord,
-                image: np.ndarray) -> ToolStep:
+                image: np.ndarray, zero: float | None) -> ToolStep:
         """One step from ``first`` (read on ``image``) and ``settle_frames - 1`` more frames
         (``settle_average``). A frame where the part is not found, or whose step is outside
         the settle window (``settle_mm``, ``settle_deg``; a misreading), is left out. The
         record keeps every frame's step (``settle``, the first one first; null where not
         found) and the mean frame's (``settle_mean_frame``). Where the mean frame reads no
-        part or a step outside the window, the frames' mean step is taken."""
+        part or a step outside the window, the frames' mean step is taken. Every frame's
+        step has the look's ``zero`` (``_heading_zero``) taken off."""
         cfg = self.config
         steps, images = [first], [image]
         read = [[first.dx_mm, first.dy_mm, first.dphi_deg]]
         for _ in range(cfg.settle_frames - 1):
             image = self.camera.grab().image
-            step = self._full_step(estimator, image)
+            step = self._full_step(estimator, image, zero)
             if step is None:
                 read.append(None)
                 continue
@@ -462,7 +471,7 @@ class PositioningLoop:
                 images.append(image)
         record.estimates["settle"] = read
         if cfg.settle_average == "frames" and len(images) > 1:
-            step = self._full_step(estimator, mean_frame(images))
+            step = self._full_step(estimator, mean_frame(images), zero)
             record.estimates["settle_mean_frame"] = None if step is None else \
                 [step.dx_mm, step.dy_mm, step.dphi_deg]
             if step is not None and self._settling(step):
@@ -472,12 +481,27 @@ class PositioningLoop:
                         sum(s.dphi_deg for s in steps) / n)
 
     @staticmethod
-    def _full_step(estimator: Estimator, image: np.ndarray) -> ToolStep | None:
-        """The full step read on ``image``, None where the part is not found."""
+    def _full_step(estimator: Estimator, image: np.ndarray,
+                   zero: float | None) -> ToolStep | None:
+        """The full step read on ``image`` less ``zero``, None where the part is not found."""
         tr = estimator.estimate_translation(image)
         if tr.status != "ok":
             return None
-        return corrective_step(tr, estimator.estimate_rotation(tr))
+        return _less(corrective_step(tr, estimator.estimate_rotation(tr)), zero)
+
+    def _heading_zero(self, estimator: Estimator, record: IterationRecord) -> float | None:
+        """The estimator's zero of the turn at the tool's heading (deg;
+        ``calibration_free.heading_zero``; the pose the last move reached, no exchange where
+        the arm keeps it), logged as ``heading_zero`` with the heading (null: beyond the
+        headings it was read at); None where the model has no zero by heading."""
+        table = estimator.heading_zero
+        if table is None:
+            return None
+        heading = self.arm.pose(fresh=False).approach_rotation_deg
+        zero = table.at(heading)
+        record.estimates["heading_deg"] = heading
+        record.estimates["heading_zero"] = zero
+        return zero
 
     def _settling(self, step: ToolStep) -> bool:
         cfg = self.config

@@ -123,7 +123,7 @@ def _train(ctx: JobContext) -> dict[str, Any]:
 
 def _rezero(ctx: JobContext) -> dict[str, Any]:
     system = ctx.args["system"]
-    model, report = ctx.fp.rezero(ctx.args["frames"], system)
+    model, report = ctx.fp.rezero(ctx.args["frames"], system, ctx.args["heading_step"])
     in_use = ctx.models.model
     if in_use is None or in_use.system == system:  # another system in use stays in use
         ctx.models.set(model, ctx.fp.model_path(system))

@@ -38,6 +38,7 @@ class ModelEstimator:
     """An Estimator that runs one trained model object, ``self.model``."""
 
     name: ClassVar[str]
+    heading_zero = None  # these systems keep one zero for every heading
 
     def __init__(self, model: Any) -> None:
         self.model = model

@@ -14,6 +14,7 @@ from typing import Any, Literal, Protocol
 
 import numpy as np
 
+from calibration_free.heading_zero import HeadingZero
 from drivers.core.pose import ToolStep
 
 Status = Literal["ok", "no_object", "ambiguous"]
@@ -66,9 +67,14 @@ class RotationEstimate:
 
 
 class Estimator(Protocol):
-    """A vision system usable by the positioning loop."""
+    """A vision system usable by the positioning loop.
+
+    ``heading_zero``: the model's zero of the turn by the tool's heading in the cell's light
+    (``calibration_free.heading_zero``), which the loop takes off each full look's turn; None:
+    the system's readings are used as they are."""
 
     name: str
+    heading_zero: HeadingZero | None
 
     def estimate_translation(self, image: np.ndarray) -> TranslationEstimate:
         """Perceive one frame (HxWx3 uint8 RGB) as far as the translation: localise the part

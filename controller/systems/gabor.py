@@ -24,6 +24,7 @@ class GaborEstimator:
 
     def __init__(self, bundle: ModelBundle) -> None:
         self.perception = Perception(bundle)
+        self.heading_zero = bundle.heading_zero
 
     def estimate_translation(self, image: np.ndarray) -> TranslationEstimate:
         """Localisation, NN1, and NN2 with the rotation-aware translation (``nn1_rot``); see

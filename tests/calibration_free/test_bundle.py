@@ -13,6 +13,7 @@ from calibration_free.bundle import FORMAT_VERSION, KIND, ModelBundle
 from calibration_free.ends import EndMap
 from calibration_free.errors import BundleError
 from calibration_free.gabor import GaborConfig
+from calibration_free.heading_zero import HeadingZero
 from calibration_free.model_file import pack_model
 from calibration_free.perception import Perception
 from calibration_free.synthetic import render
@@ -133,7 +134,7 @@ def test_a_file_in_the_version_4_layout_loads_and_is_still_written(bundle, cell,
     # saving writes the same layout, plus the part's colour and the near net's range
     written = bundle.to_info()
     expected = version_4_info(bundle)
-    assert sorted(written) == sorted([*expected, "near_mm", "axis"])
+    assert sorted(written) == sorted([*expected, "near_mm", "axis", "heading_zero"])
     assert written["localisation"] == {**expected["localisation"],
                                        "chroma": list(bundle.front.chroma),
                                        "chroma_tolerance": bundle.front.chroma_tolerance,
@@ -294,6 +295,18 @@ def test_a_version_8_file_reads_the_rims_of_the_parts_holes(bundle, tmp_path):
     old = ModelBundle.load(path)
     assert old.format_version == 8 and old.front.edge_gamma == 2.2
     assert not old.front.edge.fill_holes
+
+
+def test_a_version_9_file_has_no_zero_by_heading_and_version_10_keeps_it(bundle, tmp_path):
+    table = HeadingZero((0.0, 45.0), (0.3, -0.4))
+    path = tmp_path / "cube.bundle"
+    dataclasses.replace(bundle, heading_zero=table).save(path)
+    assert ModelBundle.load(path).heading_zero == table
+    info, tensors = info_and_tensors(bundle)
+    del info["heading_zero"]
+    path.write_bytes(pack(info, tensors, version=9))
+    old = ModelBundle.load(path)
+    assert old.format_version == 9 and old.heading_zero is None
 
 
 def test_the_taught_area_is_learned_and_checked(bundle, cell, tmp_path):

@@ -4,6 +4,7 @@ import dataclasses
 import json
 import math
 
+import numpy as np
 import pytest
 
 from controller.cli import main
@@ -169,6 +170,46 @@ def test_cli_rezero_moves_the_zero_to_the_new_light_and_refuses_a_moved_part(tra
     err = capsys.readouterr().err.strip().splitlines()
     assert "the part is not where it was taught" in err[-1]
     assert model.read_bytes() == written
+
+
+def test_cli_rezero_by_heading_turns_the_part_and_puts_it_back(trained, tmp_path, capsys):
+    """`finepos rezero --heading-step`: the arm grasps the cube, turns it, sets it down and
+    looks at each heading; the model keeps NN2's zero by heading, and the part lies back at
+    its taught heading and place, the arm at the taught pose; a plain rezero drops the
+    table; bad options are refused in one line before the arm moves."""
+    import shutil
+
+    from calibration_free.bundle import ModelBundle
+
+    state = tmp_path / "state"
+    shutil.copytree(trained, state)
+    poor = tmp_path / "poor.yaml"
+    poor.write_text("scene:\n  lighting:\n    preset: poor\n")
+    cfg = load_config(poor)
+    with open_devices(cfg, seed=2) as devices:
+        fp = FinePositioner(devices, cfg, state_dir=state)
+        before = devices.cell.object_pose()
+        _, report = fp.rezero(6, heading_step_deg=30.0, heading_range_deg=(-30.0, 30.0))
+        after = devices.cell.object_pose()
+        assert math.hypot(after[0] - before[0], after[1] - before[1]) < 0.3
+        assert abs(wrap_deg(after[2] - before[2], 90.0)) < 0.3
+        assert devices.cell.arm_pose() == pytest.approx(fp.state().nominal_pose)
+    table = report["heading_zero"]
+    assert list(np.diff(table["headings_deg"])) == pytest.approx([30, 30], abs=0.5)
+    assert ModelBundle.load(state / "model-gabor.fpm").heading_zero.to_info() == table
+    args = ["rezero", "--state-dir", str(state), "--config", str(poor), "--frames", "6"]
+    assert main(args) == 0
+    assert json.loads(capsys.readouterr().out)["heading_zero"] is None
+    assert ModelBundle.load(state / "model-gabor.fpm").heading_zero is None
+    written = (state / "model-gabor.fpm").read_bytes()
+    for bad, message in ((["--heading-range", "0", "10"], "--heading-range: only with"),
+                         (["--heading-step", "5", "--heading-range", "10", "0"],
+                          "heading range must run from a lower"),
+                         (["--heading-step", "5", "--system", "align"], "keeps one zero")):
+        assert main(args + bad) == 2, bad
+        err = capsys.readouterr().err.strip().splitlines()
+        assert len(err) == 1 and message in err[0], err
+    assert (state / "model-gabor.fpm").read_bytes() == written
 
 
 def test_position_then_grasp_makes_the_converged_step_with_the_first_descent(trained, caplog):

@@ -15,6 +15,7 @@ class TruthEstimator:
     """Sees the exact step back to NOMINAL, scaled by ``gain`` (gain < 1: a cautious net)."""
 
     name = "truth"
+    heading_zero = None
 
     def __init__(self, arm: FakeArm, gain: float = 1.0, kappa: int = 4,
                  status: str = "ok") -> None:

@@ -8,6 +8,7 @@ import math
 import numpy as np
 import pytest
 
+from calibration_free.heading_zero import HeadingZero
 from calibration_free.preprocess import mean_frame
 from controller.loop.iteration_log import IterationLog, read_log
 from controller.loop.positioning import LoopConfig, PositioningLoop
@@ -577,3 +578,41 @@ def test_a_grasp_to_follow_gets_the_converged_step_instead_of_a_move(tmp_path):
     result = PositioningLoop(arm, cam, cfg).run(TruthEstimator(arm, gain=0.5),
                                                 carry_final_step=True)
     assert result.outcome == "converged" and result.carried is None
+
+
+class LampEstimator(TruthEstimator):
+    """The true step, its turn read off by an offset that follows the tool's heading, as a
+    lamp at the side makes it; ``heading_zero``: the model's zero by heading (None: none)."""
+
+    def __init__(self, arm, lamp: HeadingZero, heading_zero: HeadingZero | None, **kw):
+        super().__init__(arm, **kw)
+        self.lamp, self.heading_zero = lamp, heading_zero
+
+    def estimate_rotation(self, translation):
+        r = super().estimate_rotation(translation)
+        return dataclasses.replace(r, dphi_deg=r.dphi_deg + self.lamp.at(
+            self.arm._pose.approach_rotation_deg))
+
+
+def test_the_zero_by_heading_is_taken_off_each_full_look(tmp_path):
+    """Where NN2 reads a turn that follows the tool's heading, the loop ends turned by it;
+    with the model's zero by heading it ends on the pose, and the log keeps the zero."""
+    headings = tuple(float(h) for h in range(-180, 180, 10))
+    lamp = HeadingZero(headings, tuple(0.6 * math.sin(math.radians(2 * h)) + 0.3
+                                       for h in headings))
+    start = ToolStep(6.0, -4.0, 0.0, 12.0)
+    arm, cam, cfg = make(start, max_loops=4.0)
+    plain = PositioningLoop(arm, cam, cfg, None, lambda: truth_error(arm)).run(
+        LampEstimator(arm, lamp, None))
+    assert abs(plain.states[-1].error[2]) > 0.2
+    arm, cam, cfg = make(start, max_loops=4.0)
+    with IterationLog(tmp_path / "it.jsonl") as log:
+        zeroed = PositioningLoop(arm, cam, cfg, log, lambda: truth_error(arm)).run(
+            LampEstimator(arm, lamp, lamp))
+    assert zeroed.outcome == "converged"
+    ex, ey, ephi = zeroed.states[-1].error
+    assert math.hypot(ex, ey) < 0.01 and abs(ephi) < 0.05
+    full = [r for r in map(json.loads, (tmp_path / "it.jsonl").read_text().splitlines())
+            if r.get("heading_zero") is not None]
+    assert full, "no full look logged its zero by heading"
+    assert full[-1]["heading_zero"] == pytest.approx(lamp.at(full[-1]["heading_deg"]))

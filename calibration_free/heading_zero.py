@@ -1,0 +1,114 @@
+"""NN2's zero by the tool's heading: the turn it reads at the taught pose, part and tool
+turned together to each of several headings under the cell's own light.
+
+A lamp fixed in the cell lights the part from another side as the part's heading changes, and
+the tool, aligned with the part, sees it so: the faces lit, the shading of the rounded edges
+and the cast shadow turn with the heading, and the turn NN2 reads at the taught pose turns
+with them (under the poor preset's low side lamp the cube's reading wanders by +-0.35 deg over
+its quarter turn, with a step where its front face turns into the light). A zero taken at one
+heading (``calibration_free.rezero``) removes the offset there and leaves the rest.
+``FinePositioner.rezero`` with a heading step has the arm take the part in its jaws at the
+taught pose, turn it and set it down at each heading of a range, go back up to the taught
+pose over it and read NN2 there: that reading is the zero at that tool heading
+(``controller.teach.heading_zero``). The positioning loop takes the table's value at the
+tool's heading off every full look's turn.
+
+Only the turn: the translation nets' reading moves with the heading too (0.05 mm RMS for the
+cube), but a set-down leaves the part 0.01-0.02 mm off where the jaws took it, and over a
+range's set-downs that is as large as what it would measure (README "Re-zero by heading").
+
+Headings are the tool's turn about the vertical in the world (``Pose.approach_rotation_deg``),
+as the arm reports it; the table holds them unwrapped (increasing, less than a turn apart). At a
+heading between two of them the zero is interpolated linearly; up to one step beyond either
+end the nearer end's holds; further out nothing is known and nothing is taken off.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Sequence
+from dataclasses import dataclass
+
+import numpy as np
+
+from calibration_free.errors import BundleError
+
+MAX_ROWS = 720
+# a zero further off than this is no lamp's offset but a misreading (the part not where it
+# was set down): refused when the table is made or loaded
+MAX_OFFSET_DEG = 5.0
+
+
+@dataclass(frozen=True)
+class HeadingZero:
+    """headings_deg: the tool headings read at, increasing, spanning less than 360 deg;
+    dphi_deg: per heading, the turn the loop's full look read there (deg)."""
+
+    headings_deg: tuple[float, ...]
+    dphi_deg: tuple[float, ...]
+
+    def __post_init__(self) -> None:
+        try:
+            headings = tuple(float(h) for h in self.headings_deg)
+            dphi = tuple(float(v) for v in self.dphi_deg)
+        except (TypeError, ValueError) as exc:
+            raise BundleError(f"heading_zero: not numbers ({exc})") from None
+        if not 2 <= len(headings) <= MAX_ROWS:
+            raise BundleError(f"heading_zero: needs 2 to {MAX_ROWS} headings, got "
+                              f"{len(headings)}")
+        if len(dphi) != len(headings):
+            raise BundleError(f"heading_zero: needs one turn per heading, got {len(dphi)} for "
+                              f"{len(headings)}")
+        if not all(math.isfinite(v) for v in (*headings, *dphi)):
+            raise BundleError("heading_zero: headings and turns must be finite numbers")
+        if any(b <= a for a, b in zip(headings, headings[1:], strict=False)) \
+                or headings[-1] - headings[0] >= 360.0:
+            raise BundleError("heading_zero: headings must increase and span less than 360 "
+                              f"deg, got {headings[0]:g}..{headings[-1]:g}")
+        for h, v in zip(headings, dphi, strict=True):
+            if abs(v) > MAX_OFFSET_DEG:
+                raise BundleError(f"heading_zero: at {h:g} deg NN2 read {v:.2f} deg: beyond "
+                                  f"{MAX_OFFSET_DEG:g} deg, not a light's offset")
+        object.__setattr__(self, "headings_deg", headings)
+        object.__setattr__(self, "dphi_deg", dphi)
+
+    @classmethod
+    def from_readings(cls, readings: Sequence[tuple[float, float]]) -> HeadingZero:
+        """From (tool heading deg, turn read deg) pairs in any order, each heading taken
+        within half a turn of the first (unwrapped), sorted."""
+        if not readings:
+            raise BundleError("heading_zero: no readings")
+        first = float(readings[0][0])
+        rows = sorted((first + (float(h) - first + 180.0) % 360.0 - 180.0, float(v))
+                      for h, v in readings)
+        return cls(tuple(h for h, _ in rows), tuple(v for _, v in rows))
+
+    @property
+    def step_deg(self) -> float:
+        """The widest gap between two neighbouring headings."""
+        h = self.headings_deg
+        return max(b - a for a, b in zip(h, h[1:], strict=False))
+
+    def at(self, heading_deg: float) -> float | None:
+        """The zero (deg) at a tool heading; None beyond the table's ends by more than its
+        step (not read there)."""
+        if not math.isfinite(heading_deg):
+            return None
+        h = self.headings_deg
+        mid = 0.5 * (h[0] + h[-1])
+        x = mid + (heading_deg - mid + 180.0) % 360.0 - 180.0  # the turn nearest the table
+        if x < h[0] - self.step_deg or x > h[-1] + self.step_deg:
+            return None
+        return float(np.interp(x, h, self.dphi_deg))
+
+    def to_info(self) -> dict:
+        """JSON for the model file."""
+        return {"headings_deg": list(self.headings_deg), "dphi_deg": list(self.dphi_deg)}
+
+    @classmethod
+    def from_info(cls, info) -> HeadingZero:
+        """From ``to_info``'s JSON; BundleError (one line) where it is not that."""
+        if not isinstance(info, dict) or not isinstance(info.get("headings_deg"), list) \
+                or not isinstance(info.get("dphi_deg"), list):
+            raise BundleError("heading_zero: expected {headings_deg: [...], dphi_deg: [...]}")
+        return cls(tuple(info["headings_deg"]), tuple(info["dphi_deg"]))

@@ -1,0 +1,144 @@
+"""Reading NN2's zero by heading on the cell (``calibration_free.heading_zero``).
+
+From the taught pose, with the part where it was taught: for each heading of the range the
+arm grasps the part (``controller.loop.grasp``, the guards and checks of every grasp), turns
+it about the approach axis while it is lifted, sets it down where it was, lets go and goes
+back up to the taught pose turned with it, so that the tool stands over the part as at the
+taught pose; the camera sees the part as taught, lit from another side. There NN2 is read as
+the loop reads it (the full look's turn, on the means of ``average`` frames): that reading is
+the zero at the tool's heading. At the end the part is turned back to its taught heading and
+the arm stands at the taught pose, as before.
+
+Every set-down leaves the part a little off where the jaws took it: the arm's repeatability,
+and the part settling as the jaws let go (on the simulated cell 0.01-0.02 mm and a few
+thousandths of a degree a set-down). NN2 is read at the taught heading before the first grasp
+and again once the part is back there: the difference, shared out over the set-downs, is
+taken off each heading's reading in proportion to the set-downs before it, as a surveyor
+closes a traverse. The translation is not read this way: the set-downs' shifts add up to as
+much as the lamp moves the translation nets' reading.
+
+Each heading costs a grasp, a turn, a set-down and a look: about 7 cell seconds with the
+realistic timing.
+"""
+
+from __future__ import annotations
+
+import logging
+import math
+
+import numpy as np
+
+from calibration_free.errors import TrainingError
+from calibration_free.heading_zero import HeadingZero
+from calibration_free.preprocess import mean_frame
+from controller.loop.grasp import guarded_grasp
+from controller.systems.estimator import corrective_step
+from drivers.core import parts
+from drivers.core.pose import Pose, ToolStep, wrap_deg
+
+logger = logging.getLogger(__name__)
+
+MAX_HEADINGS = 360
+
+
+def headings(step_deg: float, range_deg: tuple[float, float]) -> list[float]:
+    """The heading changes (deg, the part's turn in the world) from ``range_deg[0]`` to
+    ``range_deg[1]`` in steps of at most ``step_deg``, both ends included.
+
+    Raises:
+        TrainingError: a step that is not positive, a range that is empty, reversed or a whole
+            turn or more, or more than MAX_HEADINGS headings.
+    """
+    lo, hi = (float(v) for v in range_deg)
+    if not (math.isfinite(step_deg) and step_deg > 0.0):
+        raise TrainingError(f"rezero: the heading step must be > 0 deg, got {step_deg!r}")
+    if not (math.isfinite(lo) and math.isfinite(hi) and lo < hi and hi - lo < 360.0):
+        raise TrainingError(f"rezero: the heading range must run from a lower to a higher "
+                            f"heading less than a turn apart, got {lo:g}..{hi:g} deg")
+    n = math.ceil((hi - lo) / step_deg - 1e-9)
+    if n + 1 > MAX_HEADINGS:
+        raise TrainingError(f"rezero: {n + 1} headings of {step_deg:g} deg over {lo:g}.."
+                            f"{hi:g} deg; at most {MAX_HEADINGS}")
+    return [lo + (hi - lo) * i / n for i in range(n + 1)]
+
+
+def _turn_sign(taught: Pose) -> float:
+    """+1 where a positive tool turn (about the approach axis) turns the tool's heading the
+    positive way in the world, -1 where it turns it the other way (the approach axis points
+    down)."""
+    turned = taught.moved_in_tool_frame(ToolStep(dphi_deg=10.0))
+    return 1.0 if wrap_deg(turned.approach_rotation_deg - taught.approach_rotation_deg,
+                           360.0) > 0 else -1.0
+
+
+def read_heading_zero(fp, estimator, step_deg: float, range_deg: tuple[float, float],
+                      frames: int, average: int) -> HeadingZero:
+    """The zero by heading over ``range_deg`` (the part's turn from its taught heading, deg)
+    in steps of at most ``step_deg`` (see the module docstring); ``fp``: the
+    ``FinePositioner``, its arm at the taught pose and the part where it was taught;
+    ``estimator``: the re-zeroed model's, without a zero by heading.
+
+    Raises:
+        TrainingError: a grasp that fails (the arm has backed off to where it started it; the
+            part may lie turned), or the part not seen at a heading.
+        FineposError: the arm or another device failed.
+    """
+    turns = headings(step_deg, range_deg)
+    state = fp.state()
+    frames_at = _reader(fp, estimator, frames, average)
+    arm, grasp_cfg = fp.devices.arm, fp.config.controller.grasp
+    taught = state.nominal_pose
+    sign = _turn_sign(taught)
+    weight_n = parts.part(state.object_kind).mass_g * 9.81e-3
+    current = 0.0  # the part's turn from its taught heading
+    set_downs = 0
+
+    def set_down_at(turn: float) -> None:
+        nonlocal current, set_downs
+        if turn == current:
+            return
+        result = guarded_grasp(arm, fp.devices.wrench, state.grasp_depth_mm,
+                               state.object_width_mm, grasp_cfg, weight_n)
+        if not result.success:
+            raise TrainingError(f"rezero: the grasp to turn the part to {turn:g} deg failed "
+                                f"({result.reason})")
+        arm.move_tool(ToolStep(dphi_deg=sign * (turn - current)))
+        arm.move_tool(ToolStep(dz_mm=grasp_cfg.lift_mm))
+        arm.open_gripper()
+        current = turn
+        set_downs += 1
+        fp.move_to(taught.moved_in_tool_frame(ToolStep(dphi_deg=sign * turn)))
+
+    before = frames_at(0.0)  # the part where it was taught
+    readings = []  # (heading, turn read, set-downs before)
+    for turn in turns:
+        set_down_at(turn)
+        readings.append((arm.pose().approach_rotation_deg, frames_at(turn), set_downs))
+    set_down_at(0.0)
+    drift = (frames_at(0.0) - before) / max(set_downs, 1)  # a set-down's
+    logger.info("rezero: %d set-downs turned the part by %.3f deg each", set_downs, drift)
+    closed = []
+    for heading, read, count in readings:
+        closed.append((heading, read - count * drift))
+        logger.info("rezero: at heading %.1f deg NN2 reads %.3f deg at the taught pose",
+                    heading, closed[-1][1])
+    return HeadingZero.from_readings(closed)
+
+
+def _reader(fp, estimator, frames: int, average: int):
+    """The turn the loop's full look reads (deg), on the means of ``average`` frames at the
+    arm's pose, averaged over ``frames`` frames."""
+
+    def read(turn: float) -> float:
+        grabbed = [fp.devices.camera.grab().image for _ in range(frames)]
+        turns = []
+        for i in range(0, frames, average):
+            tr = estimator.estimate_translation(mean_frame(grabbed[i:i + average]))
+            if tr.status == "ok":
+                turns.append(corrective_step(tr, estimator.estimate_rotation(tr)).dphi_deg)
+        if 2 * len(turns) < math.ceil(frames / average):
+            raise TrainingError(f"rezero: the part is not seen at the taught pose turned by "
+                                f"{turn:g} deg")
+        return float(np.mean(turns))
+
+    return read
