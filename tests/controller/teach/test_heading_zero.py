@@ -1,0 +1,33 @@
+"""The headings a re-zero by heading visits, and the ranges it refuses before the arm moves
+(the procedure itself on the simulated cell: ``tests/controller/test_end_to_end.py``)."""
+
+from __future__ import annotations
+
+import math
+
+import pytest
+
+from calibration_free.errors import TrainingError
+from controller.teach.heading_zero import MAX_HEADINGS, headings
+
+
+def test_a_range_in_even_steps_of_at_most_the_step_both_ends_included():
+    assert headings(5.0, (-45.0, 45.0)) == pytest.approx([-45.0 + 5.0 * i for i in range(19)])
+    assert 0.0 in headings(5.0, (-45.0, 45.0))
+    assert headings(40.0, (-45.0, 45.0)) == pytest.approx([-45.0, -15.0, 15.0, 45.0])
+    assert headings(500.0, (0.0, 10.0)) == pytest.approx([0.0, 10.0])
+
+
+@pytest.mark.parametrize("step, span, match", [
+    (0.0, (-45.0, 45.0), "step must be > 0"),
+    (math.nan, (-45.0, 45.0), "step must be > 0"),
+    (5.0, (10.0, 0.0), "lower to a higher"),
+    (5.0, (0.0, 0.0), "lower to a higher"),
+    (5.0, (-180.0, 180.0), "less than a turn"),
+    (5.0, (0.0, math.inf), "lower to a higher"),
+    (0.5, (-179.0, 179.0), f"at most {MAX_HEADINGS}"),
+])
+def test_ranges_that_are_no_turns_are_refused_in_one_line(step, span, match):
+    with pytest.raises(TrainingError, match=match) as err:
+        headings(step, span)
+    assert "\n" not in str(err.value)
