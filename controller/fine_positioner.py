@@ -26,7 +26,7 @@ from controller.systems.base import TrainedModel
 from controller.systems.registry import SYSTEMS
 from controller.teach.acquisition import acquire, grid_for, random_set, transfer
 from controller.teach.cell_state import CellState
-from controller.teach.heading_zero import headings, read_heading_zero
+from controller.teach.heading_zero import default_range, headings, read_heading_zero
 from drivers.core import parts
 from drivers.core.errors import FineposError
 from drivers.core.pose import Pose
@@ -223,10 +223,10 @@ class FinePositioner:
 
         With ``heading_step_deg`` (Gabor only) NN2 is then also read with the part turned to
         each heading of ``heading_range_deg`` (the part's turn from its taught heading;
-        default one symmetry period centred on it) in steps of at most that
-        (``controller.teach.heading_zero``: the arm turns the part itself), and the model
-        keeps it as NN2's zero by heading, which the loop takes off each full look's turn. A
-        re-zero without it drops the model's zero by heading.
+        default ``heading_zero.default_range``: one symmetry period centred on it) in steps
+        of at most that (``controller.teach.heading_zero``: the arm turns the part itself),
+        and the model keeps it as NN2's zero by heading, which the loop takes off each full
+        look's turn. A re-zero without it drops the model's zero by heading.
 
         Returns:
             The model and what moved (the report's ``shift_mm``: each Gabor net's reading
@@ -249,8 +249,7 @@ class FinePositioner:
                                "system keeps one zero")
         model = self.load_model(system=system)
         if heading_step_deg is not None:
-            period = 360.0 / model.model.kappa
-            span = heading_range_deg or (-period / 2.0, period / 2.0)
+            span = heading_range_deg or default_range(model.model.kappa, heading_step_deg)
             headings(heading_step_deg, span)  # refused before the arm moves
         self.move_to(self.state().nominal_pose)
         images = [self.devices.camera.grab().image for _ in range(frames)]

@@ -245,10 +245,11 @@ def register(subparsers) -> None:
                     "turns it, sets it down and reads NN2 from the taught pose turned with it, "
                     "at headings at most DEG apart over --heading-range FROM TO (the part's "
                     "turn from its taught heading, deg; default one symmetry period centred "
-                    "on it: -45 45 for the cube), and puts it back; the loop then takes the "
-                    "zero at the tool's heading off each full look's turn. About 7 s a "
-                    "heading; the gripper must be able to grasp the part there. A plain "
-                    "rezero drops the zero by heading (it belongs to the old light).")
+                    "on it: -45 45 for the cube; the whole turn less one step for the screw), "
+                    "and puts it back; the loop then takes the zero at the tool's heading off "
+                    "each full look's turn. About 7 s a heading; the gripper must be able to "
+                    "grasp the part there. A plain rezero drops the zero by heading (it "
+                    "belongs to the old light).")
     add_config_option(p)
     add_device_options(p)
     add_part_option(p, TAUGHT_PART_HELP)

@@ -41,6 +41,15 @@ logger = logging.getLogger(__name__)
 MAX_HEADINGS = 360
 
 
+def default_range(kappa: int, step_deg: float) -> tuple[float, float]:
+    """One symmetry period centred on the taught heading; for a part without symmetry (one
+    period is the whole turn) the turn less one step, so that no heading is read twice."""
+    period = 360.0 / kappa
+    if kappa > 1:
+        return -period / 2.0, period / 2.0
+    return -180.0, 180.0 - min(step_deg, 180.0)
+
+
 def headings(step_deg: float, range_deg: tuple[float, float]) -> list[float]:
     """The heading changes (deg, the part's turn in the world) from ``range_deg[0]`` to
     ``range_deg[1]`` in steps of at most ``step_deg``, both ends included.

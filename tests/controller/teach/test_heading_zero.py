@@ -8,7 +8,7 @@ import math
 import pytest
 
 from calibration_free.errors import TrainingError
-from controller.teach.heading_zero import MAX_HEADINGS, headings
+from controller.teach.heading_zero import MAX_HEADINGS, default_range, headings
 
 
 def test_a_range_in_even_steps_of_at_most_the_step_both_ends_included():
@@ -16,6 +16,14 @@ def test_a_range_in_even_steps_of_at_most_the_step_both_ends_included():
     assert 0.0 in headings(5.0, (-45.0, 45.0))
     assert headings(40.0, (-45.0, 45.0)) == pytest.approx([-45.0, -15.0, 15.0, 45.0])
     assert headings(500.0, (0.0, 10.0)) == pytest.approx([0.0, 10.0])
+
+
+def test_the_default_range_is_one_symmetry_period_and_a_whole_turn_less_a_step():
+    assert default_range(4, 5.0) == (-45.0, 45.0)
+    assert default_range(2, 5.0) == (-90.0, 90.0)
+    turn = headings(10.0, default_range(1, 10.0))
+    assert turn[0] == -180.0 and turn[-1] == pytest.approx(170.0) and len(turn) == 36
+    assert headings(500.0, default_range(1, 500.0)) == pytest.approx([-180.0, 0.0])
 
 
 @pytest.mark.parametrize("step, span, match", [
