@@ -111,7 +111,11 @@ def read_heading_zero(fp, estimator, step_deg: float, range_deg: tuple[float, fl
         if not result.success:
             raise TrainingError(f"rezero: the grasp to turn the part to {turn:g} deg failed "
                                 f"({result.reason})")
-        arm.move_tool(ToolStep(dphi_deg=sign * (turn - current)))
+        # turned in moves within the safety layer's limit (``safety.max_step_deg``)
+        total = sign * (turn - current)
+        pieces = max(1, math.ceil(abs(total) / fp.config.safety.max_step_deg - 1e-9))
+        for _ in range(pieces):
+            arm.move_tool(ToolStep(dphi_deg=total / pieces))
         arm.move_tool(ToolStep(dz_mm=grasp_cfg.lift_mm))
         arm.open_gripper()
         current = turn

@@ -189,13 +189,14 @@ def test_cli_rezero_by_heading_turns_the_part_and_puts_it_back(trained, tmp_path
     with open_devices(cfg, seed=2) as devices:
         fp = FinePositioner(devices, cfg, state_dir=state)
         before = devices.cell.object_pose()
-        _, report = fp.rezero(6, heading_step_deg=30.0, heading_range_deg=(-30.0, 30.0))
+        # turns of 120 deg: more than the safety layer's 100 deg a move, made in two
+        _, report = fp.rezero(6, heading_step_deg=120.0, heading_range_deg=(-120.0, 120.0))
         after = devices.cell.object_pose()
         assert math.hypot(after[0] - before[0], after[1] - before[1]) < 0.3
         assert abs(wrap_deg(after[2] - before[2], 90.0)) < 0.3
         assert devices.cell.arm_pose() == pytest.approx(fp.state().nominal_pose)
     table = report["heading_zero"]
-    assert list(np.diff(table["headings_deg"])) == pytest.approx([30, 30], abs=0.5)
+    assert list(np.diff(table["headings_deg"])) == pytest.approx([120, 120], abs=0.5)
     assert ModelBundle.load(state / "model-gabor.fpm").heading_zero.to_info() == table
     args = ["rezero", "--state-dir", str(state), "--config", str(poor), "--frames", "6"]
     assert main(args) == 0
