@@ -9,11 +9,12 @@ its quarter turn, with a step where its front face turns into the light). A zero
 heading (``calibration_free.rezero``) removes the offset there and leaves the rest.
 ``FinePositioner.rezero`` with a heading step has the arm take the part in its jaws at the
 taught pose, turn it and set it down at each heading of a range, go back up to the taught
-pose over it and read NN2 there: that reading is the zero at that tool heading
+pose over it and read the turn there as the loop reads it (NN2's, or a long part's axis
+map's where it takes over near the pose): that reading is the zero at that tool heading
 (``controller.teach.heading_zero``). The positioning loop takes the table's value at the
 tool's heading off every full look's turn.
 
-Only the turn: the translation nets' reading moves with the heading too (0.05 mm RMS for the
+Only the turn: the translation nets' reading moves with the heading too (0.04 mm RMS for the
 cube), but a set-down leaves the part 0.01-0.02 mm off where the jaws took it, and over a
 range's set-downs that is as large as what it would measure (README "Re-zero by heading").
 
