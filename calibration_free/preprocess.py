@@ -8,6 +8,7 @@ which removes global gain and offset changes of the lighting (``a * I + b`` with
 
 from __future__ import annotations
 
+from collections.abc import Sequence
 from dataclasses import dataclass
 from typing import Literal
 
@@ -136,3 +137,11 @@ def mean_frame(images: list[np.ndarray]) -> np.ndarray:
     for image in images:
         total += image
     return ((total + len(images) // 2) // len(images)).astype(np.uint8)
+
+
+def frame_means(images: Sequence[np.ndarray], average: int) -> list[np.ndarray]:
+    """The means (``mean_frame``) of consecutive groups of ``average`` frames, the last one
+    maybe smaller, as a settling look reads them; ``average`` 1: the frames themselves."""
+    if average == 1:
+        return list(images)
+    return [mean_frame(list(images[i:i + average])) for i in range(0, len(images), average)]

@@ -34,7 +34,7 @@ from calibration_free.errors import TrainingError
 from calibration_free.perception import Perception
 from calibration_free.pin import pinned
 from calibration_free.pin import whole as seen_whole_part
-from calibration_free.preprocess import mean_frame
+from calibration_free.preprocess import frame_means
 
 # A reading at the taught pose beyond these is not a change of light (a quarter pixel is about
 # 0.25 mm): the part is not where it was taught, or the camera was knocked.
@@ -91,8 +91,7 @@ def rezero(bundle: ModelBundle, images: Sequence[np.ndarray], average: int = 1) 
     if isinstance(average, bool) or not isinstance(average, int) or average < 1:
         raise TrainingError(f"rezero: average must be a whole number >= 1, got {average!r}")
     frames = len(images)
-    if average > 1:
-        images = [mean_frame(list(images[i:i + average])) for i in range(0, frames, average)]
+    images = frame_means(images, average)
     perception = Perception(bundle)
     percepts = [perception.perceive(image) for image in images]
     whole = [i for i, p in enumerate(percepts) if seen_whole_part(p)]

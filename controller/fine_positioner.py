@@ -248,9 +248,9 @@ class FinePositioner:
             raise FineposError(f"rezero: a zero by heading is the gabor system's; the {system} "
                                "system keeps one zero")
         model = self.load_model(system=system)
-        if heading_step_deg is not None:
-            span = heading_range_deg or default_range(model.model.kappa, heading_step_deg)
-            headings(heading_step_deg, span)  # refused before the arm moves
+        if heading_step_deg is not None:  # refused before the arm moves
+            turns = headings(heading_step_deg, heading_range_deg
+                             or default_range(model.model.kappa, heading_step_deg))
         self.move_to(self.state().nominal_pose)
         images = [self.devices.camera.grab().image for _ in range(frames)]
         loop = self.config.controller.loop
@@ -267,8 +267,7 @@ class FinePositioner:
             report["heading_zero"] = None
         if heading_step_deg is not None:
             estimator = SYSTEMS[system].estimator(dataclasses.replace(model, model=moved))
-            table = read_heading_zero(self, estimator, heading_step_deg, span, frames,
-                                      average)
+            table = read_heading_zero(self, estimator, turns, frames, average)
             moved = dataclasses.replace(moved, heading_zero=table)
             report["heading_zero"] = table.to_info()
         model = dataclasses.replace(model, model=moved)

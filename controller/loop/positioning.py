@@ -35,7 +35,12 @@ import numpy as np
 from calibration_free.preprocess import mean_frame
 from controller.loop.iteration_log import IterationLog
 from controller.loop.record import IterationRecord, LoopKind
-from controller.systems.estimator import Estimator, TranslationEstimate, corrective_step
+from controller.systems.estimator import (
+    Estimator,
+    TranslationEstimate,
+    corrective_step,
+    full_step,
+)
 from drivers.core.errors import MotionRejectedError
 from drivers.core.pose import ToolStep
 from drivers.interfaces import Arm, Camera, Frame
@@ -484,10 +489,8 @@ class PositioningLoop:
     def _full_step(estimator: Estimator, image: np.ndarray,
                    zero: float | None) -> ToolStep | None:
         """The full step read on ``image`` less ``zero``, None where the part is not found."""
-        tr = estimator.estimate_translation(image)
-        if tr.status != "ok":
-            return None
-        return _less(corrective_step(tr, estimator.estimate_rotation(tr)), zero)
+        step = full_step(estimator, image)
+        return None if step is None else _less(step, zero)
 
     def _heading_zero(self, estimator: Estimator, record: IterationRecord) -> float | None:
         """The estimator's zero of the turn at the tool's heading (deg;

@@ -91,6 +91,15 @@ class Estimator(Protocol):
         ...
 
 
+def full_step(estimator: Estimator, image: np.ndarray) -> ToolStep | None:
+    """The full loop's step read on ``image`` (translation, then rotation from the same
+    percept), None where the part is not found."""
+    tr = estimator.estimate_translation(image)
+    if tr.status != "ok":
+        return None
+    return corrective_step(tr, estimator.estimate_rotation(tr))
+
+
 def corrective_step(translation: TranslationEstimate,
                     rotation: RotationEstimate | None = None) -> ToolStep:
     """The step the loop sends: the translation alone (a half loop), or with the rotation and,

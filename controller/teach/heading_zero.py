@@ -25,14 +25,15 @@ from __future__ import annotations
 
 import logging
 import math
+from collections.abc import Sequence
 
 import numpy as np
 
 from calibration_free.errors import TrainingError
 from calibration_free.heading_zero import HeadingZero
-from calibration_free.preprocess import mean_frame
+from calibration_free.preprocess import frame_means
 from controller.loop.grasp import guarded_grasp
-from controller.systems.estimator import corrective_step
+from controller.systems.estimator import full_step
 from drivers.core import parts
 from drivers.core.pose import Pose, ToolStep, wrap_deg
 
@@ -80,21 +81,19 @@ def _turn_sign(taught: Pose) -> float:
                            360.0) > 0 else -1.0
 
 
-def read_heading_zero(fp, estimator, step_deg: float, range_deg: tuple[float, float],
-                      frames: int, average: int) -> HeadingZero:
-    """The zero by heading over ``range_deg`` (the part's turn from its taught heading, deg)
-    in steps of at most ``step_deg`` (see the module docstring); ``fp``: the
-    ``FinePositioner``, its arm at the taught pose and the part where it was taught;
-    ``estimator``: the re-zeroed model's, without a zero by heading.
+def read_heading_zero(fp, estimator, turns: Sequence[float], frames: int,
+                      average: int) -> HeadingZero:
+    """The zero by heading at ``turns`` (the part's turns from its taught heading, deg, in
+    order: ``headings``; see the module docstring); ``fp``: the ``FinePositioner``, its arm at
+    the taught pose and the part where it was taught; ``estimator``: the re-zeroed model's,
+    without a zero by heading.
 
     Raises:
         TrainingError: a grasp that fails (the arm has backed off to where it started it; the
             part may lie turned), or the part not seen at a heading.
         FineposError: the arm or another device failed.
     """
-    turns = headings(step_deg, range_deg)
     state = fp.state()
-    frames_at = _reader(fp, estimator, frames, average)
     arm, grasp_cfg = fp.devices.arm, fp.config.controller.grasp
     taught = state.nominal_pose
     sign = _turn_sign(taught)
@@ -122,13 +121,15 @@ def read_heading_zero(fp, estimator, step_deg: float, range_deg: tuple[float, fl
         set_downs += 1
         fp.move_to(taught.moved_in_tool_frame(ToolStep(dphi_deg=sign * turn)))
 
-    before = frames_at(0.0)  # the part where it was taught
+    before = _turn_read(fp, estimator, frames, average, 0.0)  # the part where it was taught
     readings = []  # (heading, turn read, set-downs before)
     for turn in turns:
         set_down_at(turn)
-        readings.append((arm.pose().approach_rotation_deg, frames_at(turn), set_downs))
+        readings.append((arm.pose().approach_rotation_deg,
+                         _turn_read(fp, estimator, frames, average, turn), set_downs))
     set_down_at(0.0)
-    drift = (frames_at(0.0) - before) / max(set_downs, 1)  # a set-down's
+    after = _turn_read(fp, estimator, frames, average, 0.0)
+    drift = (after - before) / max(set_downs, 1)  # a set-down's
     logger.info("rezero: %d set-downs turned the part by %.3f deg each", set_downs, drift)
     closed = []
     for heading, read, count in readings:
@@ -138,20 +139,15 @@ def read_heading_zero(fp, estimator, step_deg: float, range_deg: tuple[float, fl
     return HeadingZero.from_readings(closed)
 
 
-def _reader(fp, estimator, frames: int, average: int):
-    """The turn the loop's full look reads (deg), on the means of ``average`` frames at the
-    arm's pose, averaged over ``frames`` frames."""
-
-    def read(turn: float) -> float:
-        grabbed = [fp.devices.camera.grab().image for _ in range(frames)]
-        turns = []
-        for i in range(0, frames, average):
-            tr = estimator.estimate_translation(mean_frame(grabbed[i:i + average]))
-            if tr.status == "ok":
-                turns.append(corrective_step(tr, estimator.estimate_rotation(tr)).dphi_deg)
-        if 2 * len(turns) < math.ceil(frames / average):
-            raise TrainingError(f"rezero: the part is not seen at the taught pose turned by "
-                                f"{turn:g} deg")
-        return float(np.mean(turns))
-
-    return read
+def _turn_read(fp, estimator, frames: int, average: int, turn: float) -> float:
+    """The turn the loop's full look reads (deg) at the arm's pose, the part turned by
+    ``turn`` from its taught heading: on the means of ``average`` frames, averaged over
+    ``frames`` frames."""
+    grabbed = [fp.devices.camera.grab().image for _ in range(frames)]
+    means = frame_means(grabbed, average)
+    turns = [step.dphi_deg for step in (full_step(estimator, image) for image in means)
+             if step is not None]
+    if 2 * len(turns) < len(means):
+        raise TrainingError(f"rezero: the part is not seen at the taught pose turned by "
+                            f"{turn:g} deg")
+    return float(np.mean(turns))
