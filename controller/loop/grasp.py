@@ -140,11 +140,15 @@ def mean_force(sensor: WrenchSensor, samples: int) -> np.ndarray:
 def guarded_grasp(arm: Arm, sensor: WrenchSensor, grasp_depth_mm: float,
                   object_width_mm: float, config: GraspConfig,
                   part_weight_n: float | None = None, carried: ToolStep | None = None,
-                  on_carried: Callable[[], None] | None = None) -> GraspResult:
+                  on_carried: Callable[[], None] | None = None,
+                  lift: bool = True) -> GraspResult:
     """Run the grasp from the current (pre-grasp) pose. See the module docstring.
 
     Args:
         part_weight_n: the part's weight (N), for the weight check's default threshold.
+        lift: False: the jaws close on the part after the guarded descent (with the jam and
+            width checks) and stay there, closed, without the lift and its checks (to
+            centre the part between them).
         carried: the positioning loop's converged step, made by the first descent move
             (its dz is ignored; None: the first move descends only).
         on_carried: called after that move has made it (the caller reads the pose reached).
@@ -221,6 +225,9 @@ def guarded_grasp(arm: Arm, sensor: WrenchSensor, grasp_depth_mm: float,
     if check_width and abs(width - object_width_mm) > config.width_tolerance_mm:
         return retreat(f"grip check failed: finger width {width:.1f} mm, expected "
                        f"{object_width_mm:.1f} +/- {config.width_tolerance_mm:g} mm")
+    if not lift:
+        result.success, result.reason = True, "closed on the part"
+        return result
     if config.lift_mm > 0:
         arm.move_tool(ToolStep(dz_mm=-config.lift_mm))
         if check_width:

@@ -225,3 +225,20 @@ def test_the_first_descent_move_makes_the_carried_step():
     arm, sensor = setup(contact_depth_mm=60.0)
     res = guarded_grasp(arm, sensor, 40.0, 30.0, BY_WIDTH)
     assert res.carried_step is None and res.as_dict()["carried_step"] is None
+
+
+def test_without_the_lift_the_jaws_close_and_stay_down_unweighed():
+    """To centre a part between the jaws: the guarded descent, the closing and its jam
+    check, and no lift (the part's weight is neither needed nor checked)."""
+    arm, sensor = setup(contact_depth_mm=100.0)
+    start = arm.pose()
+    res = guarded_grasp(arm, sensor, 40.0, 30.0, GraspConfig(), part_weight_n=CUBE_N,
+                        lift=False)
+    assert res.success and res.held_weight_n is None
+    assert arm.pose().z_mm == pytest.approx(start.z_mm - 40.0)
+    assert arm.finger_width_mm() == pytest.approx(30.0)
+    arm, sensor = setup(contact_depth_mm=100.0)
+    sensor._reading = Jammed(arm)
+    res = guarded_grasp(arm, sensor, 40.0, 30.0, GraspConfig(), part_weight_n=CUBE_N,
+                        lift=False)
+    assert not res.success and "jammed" in res.reason and arm.pose() == start
