@@ -31,8 +31,9 @@ from drivers.core.pose import Pose
 from drivers.core.typed_config import from_mapping, to_mapping
 
 KIND = "gabor"
-FORMAT_VERSION = 10  # 2: max_elongation; 3: channel, nominal_uv_px; 4: nn1_rot; 5: nn1_near;
-# 6: axis; 7: axis.ends; 8: axis.silhouette; 9: localisation.edge_fill_holes; 10: heading_zero
+FORMAT_VERSION = 11  # 2: max_elongation; 3: channel, nominal_uv_px; 4: nn1_rot; 5: nn1_near;
+# 6: axis; 7: axis.ends; 8: axis.silhouette; 9: localisation.edge_fill_holes; 10: heading_zero;
+# 11: heading_zero.dx_mm, dy_mm
 POSE_KEYS = ("x_mm", "y_mm", "z_mm", "o_deg", "a_deg", "t_deg")
 
 
@@ -61,10 +62,10 @@ class ModelBundle(TaughtModel):
         axis: for an elongated part, the map from its long axis to the turn near the taught
             pose (``calibration_free.axis``), which takes over from NN2 there; None: NN2
             alone.
-        heading_zero: NN2's zero by the tool's heading in the cell's light
-            (``calibration_free.heading_zero``, made by a re-zero with a heading step; the
-            positioning loop takes it off each full look's turn); None: one zero for every
-            heading.
+        heading_zero: the zero by the tool's heading in the cell's light: NN2's turn and,
+            for the cube, the translation (``calibration_free.heading_zero``, made by a
+            re-zero with a heading step; the positioning loop takes it off each full look's
+            step); None: one zero for every heading.
         training: JSON-able training metadata (loss curves, seconds, sample counts, seed).
         format_version: file format version this bundle follows.
     """
@@ -77,7 +78,7 @@ class ModelBundle(TaughtModel):
     # before version 8 an axis map read on the features' silhouette, files before version 9
     # a colour edge that reads the rims of the part's holes too, files before version 10 no
     # zero by heading.
-    older_versions: ClassVar[tuple[int, ...]] = (4, 5, 6, 7, 8, 9)
+    older_versions: ClassVar[tuple[int, ...]] = (4, 5, 6, 7, 8, 9, 10)
 
     gabor: GaborConfig
     nn1: NumpyMLP

@@ -221,17 +221,18 @@ class FinePositioner:
         template again, ``calibration_free.baselines.align.rezero``), store the model
         (atomically) and use it. The part must lie where it was taught.
 
-        With ``heading_step_deg`` (Gabor only) NN2 is then also read with the part turned to
-        each heading of ``heading_range_deg`` (the part's turn from its taught heading;
-        default ``heading_zero.default_range``: one symmetry period centred on it) in steps
-        of at most that (``controller.teach.heading_zero``: the arm turns the part itself),
-        and the model keeps it as NN2's zero by heading, which the loop takes off each full
-        look's turn. A re-zero without it drops the model's zero by heading.
+        With ``heading_step_deg`` (Gabor only) the full look's step is then also read with
+        the part turned to each heading of ``heading_range_deg`` (the part's turn from its
+        taught heading; default ``heading_zero.default_range``: one symmetry period centred
+        on it) in steps of at most that (``controller.teach.heading_zero``: the arm turns the
+        part itself, and centres the cube between its jaws), and the model keeps it as its
+        zero by heading: NN2's turn, and for the cube the translation. The loop takes it off
+        each full look's step. A re-zero without it drops the model's zero by heading.
 
         Returns:
             The model and what moved (the report's ``shift_mm``: each Gabor net's reading
-            before, mm; ``read_mm`` / ``read_deg``: the servo's; ``heading_zero``: NN2's
-            zero by heading, or null).
+            before, mm; ``read_mm`` / ``read_deg``: the servo's; ``heading_zero``: the zero
+            by heading, or null).
 
         Raises:
             FineposError: no model of ``system`` stored, a system that does not re-zero,

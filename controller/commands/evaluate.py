@@ -29,10 +29,10 @@ Also: finepos evaluate --part all --lighting poor --rezero --trials 50
 light, as `finepos rezero` does on a cell whose light changed, then run the trials (the report's
 rezero: what each translation net read there before, mm; --system align: the servo's template
 taken again, and what it read there before). With --rezero-heading-step DEG the model also
-gets NN2's zero by heading in that light, as `finepos rezero --heading-step` reads it: the arm
+gets its zero by heading in that light, as `finepos rezero --heading-step` reads it: the arm
 turns the part itself, in steps of at most DEG over one symmetry period centred on its taught
-heading (where the trials' tool ends), and reads NN2 there (the report's
-rezero.heading_zero).
+heading (where the trials' tool ends), and reads NN2's turn there, and for the cube the
+translation too (the report's rezero.heading_zero).
 
 Also: finepos evaluate --lighting poor --teach-lighting poor --trials 50
 
@@ -186,7 +186,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                         help="first re-zero the model at the taught pose in the trials' light "
                              "(finepos rezero; gabor or align)")
     parser.add_argument("--rezero-heading-step", type=positive_float, metavar="DEG",
-                        help="with --rezero: also NN2's zero by heading, the part turned by "
+                        help="with --rezero: also the zero by heading, the part turned by "
                              "the arm in steps of at most DEG (finepos rezero --heading-step; "
                              "gabor)")
     parser.add_argument("--quiet", action="store_true", help="no progress bars")

@@ -239,17 +239,19 @@ def register(subparsers) -> None:
                     f"{MAX_TURN_DEG:g} deg there is refused: the part is not where it was "
                     "taught, or the camera moved.\n\n"
                     "Also: finepos rezero --heading-step 5\n\n"
-                    "--heading-step DEG: then also read NN2's zero by heading (gabor): a lamp "
+                    "--heading-step DEG: then also read the zero by heading (gabor): a lamp "
                     "at the side lights the part from another side at each heading, and the "
-                    "turn NN2 reads at the taught pose turns with it. The arm grasps the part, "
-                    "turns it, sets it down and reads NN2 from the taught pose turned with it, "
-                    "at headings at most DEG apart over --heading-range FROM TO (the part's "
-                    "turn from its taught heading, deg; default one symmetry period centred "
-                    "on it: -45 45 for the cube; the whole turn less one step for the screw), "
-                    "and puts it back; the loop then takes the zero at the tool's heading off "
-                    "each full look's turn. About 7 s a heading; the gripper must be able to "
-                    "grasp the part there. A plain rezero drops the zero by heading (it "
-                    "belongs to the old light).")
+                    "step read at the taught pose turns with it. The arm grasps the part, "
+                    "turns it, sets it down and reads NN2's turn from the taught pose turned "
+                    "with it, at headings at most DEG apart over --heading-range FROM TO (the "
+                    "part's turn from its taught heading, deg; default one symmetry period "
+                    "centred on it: -45 45 for the cube; the whole turn less one step for the "
+                    "screw), and puts it back; for the cube it also closes the jaws on it "
+                    "turned by a quarter turn after each set-down, which centres it, and reads "
+                    "the translation as well. The loop then takes the zero at the tool's "
+                    "heading off each full look's step. About 7 s a heading (12 s for the "
+                    "cube); the gripper must be able to grasp the part there. A plain rezero "
+                    "drops the zero by heading (it belongs to the old light).")
     add_config_option(p)
     add_device_options(p)
     add_part_option(p, TAUGHT_PART_HELP)
@@ -259,7 +261,7 @@ def register(subparsers) -> None:
                    help="the model to re-zero: gabor (the default) or align (the "
                         "image-alignment servo)")
     p.add_argument("--heading-step", type=positive_float, metavar="DEG",
-                   help="also read NN2's zero by heading, in steps of at most DEG (see above)")
+                   help="also read the zero by heading, in steps of at most DEG (see above)")
     p.add_argument("--heading-range", type=float, nargs=2, metavar=("FROM", "TO"),
                    help="with --heading-step: the part's turns from its taught heading, deg "
                         "(default: one symmetry period centred on it)")

@@ -193,11 +193,14 @@ class PositioningResult:
         self.reason = self.reason.replace(CARRIED, ", not made (the arm moved before the grasp)")
 
 
-def _less(step: ToolStep, zero: float | None) -> ToolStep:
-    """``step`` with a zero (deg: the turn read at the taught pose) taken off its turn."""
+def _less(step: ToolStep, zero: ToolStep | None) -> ToolStep:
+    """``step`` with a zero (the step read at the taught pose at the tool's heading) taken
+    off."""
     if zero is None:
         return step
-    return dataclasses.replace(step, dphi_deg=step.dphi_deg - zero)
+    return dataclasses.replace(step, dx_mm=step.dx_mm - zero.dx_mm,
+                               dy_mm=step.dy_mm - zero.dy_mm,
+                               dphi_deg=step.dphi_deg - zero.dphi_deg)
 
 
 def _turn_within_limits(step: ToolStep, arm: Arm) -> ToolStep:
@@ -453,7 +456,7 @@ class PositioningLoop:
             and read_mm <= self.config.r_fine_mm and tr.seen_share < 1.0 - share
 
     def _settle(self, estimator: Estimator, first: ToolStep, record: IterationRecord,
-                image: np.ndarray, zero: float | None) -> ToolStep:
+                image: np.ndarray, zero: ToolStep | None) -> ToolStep:
         """One step from ``first`` (read on ``image``) and ``settle_frames - 1`` more frames
         (``settle_average``). A frame where the part is not found, or whose step is outside
         the settle window (``settle_mm``, ``settle_deg``; a misreading), is left out. The
@@ -487,24 +490,29 @@ class PositioningLoop:
 
     @staticmethod
     def _full_step(estimator: Estimator, image: np.ndarray,
-                   zero: float | None) -> ToolStep | None:
+                   zero: ToolStep | None) -> ToolStep | None:
         """The full step read on ``image`` less ``zero``, None where the part is not found."""
         step = full_step(estimator, image)
         return None if step is None else _less(step, zero)
 
-    def _heading_zero(self, estimator: Estimator, record: IterationRecord) -> float | None:
-        """The estimator's zero of the turn at the tool's heading (deg;
-        ``calibration_free.heading_zero``; the pose the last move reached, no exchange where
-        the arm keeps it), logged as ``heading_zero`` with the heading (null: beyond the
-        headings it was read at); None where the model has no zero by heading."""
+    def _heading_zero(self, estimator: Estimator, record: IterationRecord) -> ToolStep | None:
+        """The estimator's zero at the tool's heading (``calibration_free.heading_zero``; the
+        pose the last move reached, no exchange where the arm keeps it): its turn logged as
+        ``heading_zero`` (deg) and its translation as ``heading_zero_mm`` ([dx, dy]), with the
+        heading (null: beyond the headings it was read at, or the translation not read);
+        None where the model has no zero by heading or none at this heading."""
         table = estimator.heading_zero
         if table is None:
             return None
         heading = self.arm.pose(fresh=False).approach_rotation_deg
-        zero = table.at(heading)
+        turn, shift = table.at(heading), table.shift_at(heading)
         record.estimates["heading_deg"] = heading
-        record.estimates["heading_zero"] = zero
-        return zero
+        record.estimates["heading_zero"] = turn
+        record.estimates["heading_zero_mm"] = None if shift is None else list(shift)
+        if turn is None:
+            return None
+        dx, dy = shift or (0.0, 0.0)
+        return ToolStep(dx, dy, 0.0, turn)
 
     def _settling(self, step: ToolStep) -> bool:
         cfg = self.config

@@ -29,7 +29,7 @@ Commands (arguments, types, ranges and defaults in ``commands.COMMANDS``):
   (``auto``: simulated cell only; otherwise the current pose, with the grasp geometry of
   ``controller.part`` unless ``grasp_depth_mm`` and ``object_width_mm`` are given), ``acquire``
   (``set``: nn1 | nn2 | test, ``seed``), ``train`` (``system``), ``rezero`` (``frames``, ``system``:
-  gabor | align, ``heading_step``: also NN2's zero by heading; re-zero the part's model at the
+  gabor | align, ``heading_step``: also the zero by heading; re-zero the part's model at the
   taught pose in the cell's light, ``FinePositioner.rezero``; the part must lie where it was
   taught; it is put into use unless another system's model is),
   ``position`` (``max_loops``; ``offset`` [dx_mm, dy_mm, dphi_deg]: simulated cell only;

@@ -65,7 +65,7 @@ COMMANDS: dict[str, dict[str, Arg]] = {
         "frames": Arg(int, REZERO_FRAMES, 1, 100, help="frames at the taught pose"),
         "system": Arg(str, "gabor", choices=REZERO_SYSTEMS, help="the model to re-zero"),
         "heading_step": Arg(float, None, 0.5, 180.0,
-                            help="also NN2's zero by heading, the arm turning the part in "
+                            help="also the zero by heading, the arm turning the part in "
                                  "steps of at most this (deg; gabor; one symmetry period "
                                  "centred on the taught heading)"),
         "wait": WAIT,

@@ -69,8 +69,9 @@ class RotationEstimate:
 class Estimator(Protocol):
     """A vision system usable by the positioning loop.
 
-    ``heading_zero``: the model's zero of the turn by the tool's heading in the cell's light
-    (``calibration_free.heading_zero``), which the loop takes off each full look's turn; None:
+    ``heading_zero``: the model's zero by the tool's heading in the cell's light (the turn, and
+    the translation where it was read: ``calibration_free.heading_zero``), which the loop takes
+    off each full look's step; None:
     the system's readings are used as they are."""
 
     name: str

@@ -1,4 +1,4 @@
-"""Reading NN2's zero by heading on the cell (``calibration_free.heading_zero``).
+"""Reading the zero by heading on the cell (``calibration_free.heading_zero``).
 
 From the taught pose, with the part where it was taught: for each heading of the range the
 arm grasps the part (``controller.loop.grasp``, the guards and checks of every grasp), turns
@@ -10,15 +10,25 @@ the zero at the tool's heading. At the end the part is turned back to its taught
 the arm stands at the taught pose, as before.
 
 Every set-down leaves the part a little off where the jaws took it: the arm's repeatability,
-and the part settling as the jaws let go (on the simulated cell 0.01-0.02 mm and a few
-thousandths of a degree a set-down). NN2 is read at the taught heading before the first grasp
-and again once the part is back there: the difference, shared out over the set-downs, is
-taken off each heading's reading in proportion to the set-downs before it, as a surveyor
-closes a traverse. The translation is not read this way: the set-downs' shifts add up to as
-much as the lamp moves the translation nets' reading.
+and the part settling as the jaws let go (on the simulated cell 0.01-0.02 mm, mostly along
+the jaws, and a few thousandths of a degree a set-down). NN2 is read at the taught heading
+before the first grasp and again once the part is back there: the difference, shared out over
+the set-downs, is taken off each heading's reading in proportion to the set-downs before it,
+as a surveyor closes a traverse.
+
+The translation's shifts would add up the same way, to as much as the lamp moves the
+translation nets' reading. For a part with two pairs of faces at right angles (kappa a
+multiple of 4: the cube) the arm centres it instead: after each set-down it goes back down
+turned by a quarter turn and closes the jaws on the other pair of faces (the grasp's descent
+and guards, no lift), which pushes the part to the middle along the jaws of the set-down, as
+the set-down's grasp did across them; it does the same at the taught heading before the first
+reading and after the last. What each heading reads less the mean of those two readings is
+its zero of the translation. The part then lies where the arm's repeatability puts it (on
+the simulated cell within 0.01-0.03 mm of the jaws' middle), whatever the set-downs before.
+For the other parts the translation is not read.
 
 Each heading costs a grasp, a turn, a set-down and a look: about 7 cell seconds with the
-realistic timing.
+realistic timing; centring the cube adds a descent, a closing and two turns.
 """
 
 from __future__ import annotations
@@ -40,6 +50,12 @@ from drivers.core.pose import Pose, ToolStep, wrap_deg
 logger = logging.getLogger(__name__)
 
 MAX_HEADINGS = 360
+
+
+def centres(kappa: int) -> bool:
+    """Whether the arm can centre the part by closing the jaws on it turned by a quarter
+    turn (two pairs of faces at right angles), and so read the translation by heading."""
+    return kappa % 4 == 0
 
 
 def default_range(kappa: int, step_deg: float) -> tuple[float, float]:
@@ -84,9 +100,10 @@ def _turn_sign(taught: Pose) -> float:
 def read_heading_zero(fp, estimator, turns: Sequence[float], frames: int,
                       average: int) -> HeadingZero:
     """The zero by heading at ``turns`` (the part's turns from its taught heading, deg, in
-    order: ``headings``; see the module docstring); ``fp``: the ``FinePositioner``, its arm at
-    the taught pose and the part where it was taught; ``estimator``: the re-zeroed model's,
-    without a zero by heading.
+    order: ``headings``; see the module docstring): the turn, and the translation where the
+    part can be centred (``centres``); ``fp``: the ``FinePositioner``, its arm at the taught
+    pose and the part where it was taught; ``estimator``: the re-zeroed model's, without a
+    zero by heading.
 
     Raises:
         TrainingError: a grasp that fails (the arm has backed off to where it started it; the
@@ -97,19 +114,26 @@ def read_heading_zero(fp, estimator, turns: Sequence[float], frames: int,
     arm, grasp_cfg = fp.devices.arm, fp.config.controller.grasp
     taught = state.nominal_pose
     sign = _turn_sign(taught)
-    weight_n = parts.part(state.object_kind).mass_g * 9.81e-3
+    part = parts.part(state.object_kind)
+    weight_n = part.mass_g * 9.81e-3
+    square = centres(part.kappa)
     current = 0.0  # the part's turn from its taught heading
     set_downs = 0
 
-    def set_down_at(turn: float) -> None:
+    def over(turn: float) -> Pose:
+        return taught.moved_in_tool_frame(ToolStep(dphi_deg=sign * turn))
+
+    def grasp(what: str, lift: bool = True):
+        result = guarded_grasp(arm, fp.devices.wrench, state.grasp_depth_mm,
+                               state.object_width_mm, grasp_cfg, weight_n, lift=lift)
+        if not result.success:
+            raise TrainingError(f"rezero: the grasp {what} failed ({result.reason})")
+
+    def set_down_at(turn: float) -> bool:
         nonlocal current, set_downs
         if turn == current:
-            return
-        result = guarded_grasp(arm, fp.devices.wrench, state.grasp_depth_mm,
-                               state.object_width_mm, grasp_cfg, weight_n)
-        if not result.success:
-            raise TrainingError(f"rezero: the grasp to turn the part to {turn:g} deg failed "
-                                f"({result.reason})")
+            return False
+        grasp(f"to turn the part to {turn:g} deg")
         # turned in moves within the safety layer's limit (``safety.max_step_deg``)
         total = sign * (turn - current)
         pieces = max(1, math.ceil(abs(total) / fp.config.safety.max_step_deg - 1e-9))
@@ -119,35 +143,60 @@ def read_heading_zero(fp, estimator, turns: Sequence[float], frames: int,
         arm.open_gripper()
         current = turn
         set_downs += 1
-        fp.move_to(taught.moved_in_tool_frame(ToolStep(dphi_deg=sign * turn)))
+        fp.move_to(over(turn))
+        return True
 
-    before = _turn_read(fp, estimator, frames, average, 0.0)  # the part where it was taught
-    readings = []  # (heading, turn read, set-downs before)
+    def centre(turn: float) -> None:
+        """Close the jaws on the part's other pair of faces (the tool a quarter turn on) and
+        back to over it at ``turn``."""
+        across = over(turn).moved_in_tool_frame(ToolStep(dphi_deg=90.0))
+        fp.move_to(across)
+        grasp(f"to centre the part at {turn:g} deg", lift=False)
+        arm.open_gripper()
+        fp.move_to(across)
+        fp.move_to(over(turn))
+
+    if square:
+        centre(0.0)
+    before = _step_read(fp, estimator, frames, average, 0.0)  # the part where it was taught
+    readings = []  # (heading, step read, set-downs before)
     for turn in turns:
-        set_down_at(turn)
+        if set_down_at(turn) and square:
+            centre(turn)
         readings.append((arm.pose().approach_rotation_deg,
-                         _turn_read(fp, estimator, frames, average, turn), set_downs))
-    set_down_at(0.0)
-    after = _turn_read(fp, estimator, frames, average, 0.0)
-    drift = (after - before) / max(set_downs, 1)  # a set-down's
+                         _step_read(fp, estimator, frames, average, turn), set_downs))
+    if set_down_at(0.0) and square:
+        centre(0.0)
+    after = _step_read(fp, estimator, frames, average, 0.0)
+    drift = (after.dphi_deg - before.dphi_deg) / max(set_downs, 1)  # a set-down's
+    ref_x, ref_y = ((before.dx_mm + after.dx_mm) / 2.0, (before.dy_mm + after.dy_mm) / 2.0)
     logger.info("rezero: %d set-downs turned the part by %.3f deg each", set_downs, drift)
+    if square:
+        logger.info("rezero: centred at the taught heading the translation read (%.3f, %.3f)"
+                    " mm before and (%.3f, %.3f) mm after", before.dx_mm, before.dy_mm,
+                    after.dx_mm, after.dy_mm)
     closed = []
     for heading, read, count in readings:
-        closed.append((heading, read - count * drift))
-        logger.info("rezero: at heading %.1f deg NN2 reads %.3f deg at the taught pose",
-                    heading, closed[-1][1])
+        row = (heading, read.dphi_deg - count * drift)
+        if square:
+            row += (read.dx_mm - ref_x, read.dy_mm - ref_y)
+        closed.append(row)
+        logger.info("rezero: at heading %.1f deg the taught pose reads %s", heading,
+                    ", ".join(f"{v:.3f}" for v in row[1:]))
     return HeadingZero.from_readings(closed)
 
 
-def _turn_read(fp, estimator, frames: int, average: int, turn: float) -> float:
-    """The turn the loop's full look reads (deg) at the arm's pose, the part turned by
+def _step_read(fp, estimator, frames: int, average: int, turn: float) -> ToolStep:
+    """The step the loop's full look reads at the arm's pose (mm, deg), the part turned by
     ``turn`` from its taught heading: on the means of ``average`` frames, averaged over
     ``frames`` frames."""
     grabbed = [fp.devices.camera.grab().image for _ in range(frames)]
     means = frame_means(grabbed, average)
-    turns = [step.dphi_deg for step in (full_step(estimator, image) for image in means)
+    steps = [step for step in (full_step(estimator, image) for image in means)
              if step is not None]
-    if 2 * len(turns) < len(means):
+    if 2 * len(steps) < len(means):
         raise TrainingError(f"rezero: the part is not seen at the taught pose turned by "
                             f"{turn:g} deg")
-    return float(np.mean(turns))
+    return ToolStep(float(np.mean([s.dx_mm for s in steps])),
+                    float(np.mean([s.dy_mm for s in steps])), 0.0,
+                    float(np.mean([s.dphi_deg for s in steps])))

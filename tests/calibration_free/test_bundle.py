@@ -309,6 +309,20 @@ def test_a_version_9_file_has_no_zero_by_heading_and_version_10_keeps_it(bundle,
     assert old.format_version == 9 and old.heading_zero is None
 
 
+def test_version_11_keeps_the_translation_by_heading_and_a_version_10_file_loads(bundle,
+                                                                                  tmp_path):
+    table = HeadingZero((0.0, 45.0), (0.3, -0.4), (0.0, 0.05), (0.0, -0.02))
+    path = tmp_path / "cube.bundle"
+    dataclasses.replace(bundle, heading_zero=table).save(path)
+    assert ModelBundle.load(path).heading_zero == table
+    info, tensors = info_and_tensors(dataclasses.replace(
+        bundle, heading_zero=HeadingZero((0.0, 45.0), (0.3, -0.4))))
+    path.write_bytes(pack(info, tensors, version=10))
+    old = ModelBundle.load(path)
+    assert old.format_version == 10 and old.heading_zero == HeadingZero((0.0, 45.0), (0.3, -0.4))
+    assert not old.heading_zero.has_translation
+
+
 def test_the_taught_area_is_learned_and_checked(bundle, cell, tmp_path):
     """The part's blob area at the taught pose (the hidden-part check's reference): the
     taught-pose frames' mean, which a frame there reads back."""

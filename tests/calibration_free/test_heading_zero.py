@@ -68,3 +68,46 @@ def test_bad_json_is_refused_in_one_line(info):
 
 def test_json_round_trip():
     assert HeadingZero.from_info(TABLE.to_info()) == TABLE
+
+
+SHIFTED = HeadingZero((0.0, 10.0, 20.0), (0.0, 0.5, -0.5), (0.0, 0.04, -0.02),
+                      (0.0, -0.01, 0.03))
+
+
+def test_the_translation_reads_its_rows_and_between_them_as_the_turn_does():
+    assert SHIFTED.has_translation and not TABLE.has_translation
+    assert SHIFTED.shift_at(10.0) == pytest.approx((0.04, -0.01))
+    assert SHIFTED.shift_at(15.0 + 360.0) == pytest.approx((0.01, 0.01))
+    assert SHIFTED.shift_at(29.0) == pytest.approx((-0.02, 0.03))
+    assert SHIFTED.shift_at(31.0) is None
+    assert TABLE.shift_at(10.0) is None  # a table of the turn only
+    assert SHIFTED.at(15.0) == pytest.approx(0.0)
+
+
+def test_readings_with_the_translation_are_sorted_with_their_headings():
+    table = HeadingZero.from_readings([(10.0, 0.5, 0.04, -0.01), (0.0, 0.0, 0.0, 0.0),
+                                       (20.0, -0.5, -0.02, 0.03)])
+    assert table == SHIFTED
+    with pytest.raises(BundleError, match="all alike"):
+        HeadingZero.from_readings([(0.0, 0.0), (10.0, 0.5, 0.04, -0.01)])
+
+
+@pytest.mark.parametrize("dx, dy, match", [
+    ((0.0, 0.1), None, "go together"),
+    ((0.0,), (0.0,), "one translation per heading"),
+    ((0.0, 1.5), (0.0, 0.0), "beyond 1 mm"),
+    ((0.0, math.nan), (0.0, 0.0), "not finite"),
+    ((0.0, "x"), (0.0, 0.0), "not numbers"),
+])
+def test_a_translation_that_is_no_light_offset_is_refused_in_one_line(dx, dy, match):
+    with pytest.raises(BundleError, match=match) as err:
+        HeadingZero((0.0, 5.0), (0.0, 0.1), dx, dy)
+    assert "\n" not in str(err.value)
+
+
+def test_json_round_trip_with_the_translation_and_bad_translation_json_refused():
+    assert HeadingZero.from_info(SHIFTED.to_info()) == SHIFTED
+    assert "dx_mm" not in TABLE.to_info()
+    info = {**SHIFTED.to_info(), "dx_mm": "0,1"}
+    with pytest.raises(BundleError, match="dx_mm"):
+        HeadingZero.from_info(info)

@@ -173,10 +173,12 @@ def test_cli_rezero_moves_the_zero_to_the_new_light_and_refuses_a_moved_part(tra
 
 
 def test_cli_rezero_by_heading_turns_the_part_and_puts_it_back(trained, tmp_path, capsys):
-    """`finepos rezero --heading-step`: the arm grasps the cube, turns it, sets it down and
-    looks at each heading; the model keeps NN2's zero by heading, and the part lies back at
-    its taught heading and place, the arm at the taught pose; a plain rezero drops the
-    table; bad options are refused in one line before the arm moves."""
+    """`finepos rezero --heading-step`: the arm grasps the cube, turns it, sets it down,
+    centres it with the jaws a quarter turn on and looks at each heading; the model keeps the
+    zero by heading, the turn and the translation, and the part lies back at its taught
+    heading, in the middle of the taught pose's jaws (it lay 0.25 mm along them off it), the
+    arm at the taught pose; a plain rezero drops the table; bad options are refused in one
+    line before the arm moves."""
     import shutil
 
     from calibration_free.bundle import ModelBundle
@@ -188,15 +190,22 @@ def test_cli_rezero_by_heading_turns_the_part_and_puts_it_back(trained, tmp_path
     cfg = load_config(poor)
     with open_devices(cfg, seed=2) as devices:
         fp = FinePositioner(devices, cfg, state_dir=state)
-        before = devices.cell.object_pose()
+        cell = devices.cell
+        along = cell.nominal_grasp_pose().rotation()[:, 0]  # the jaws' direction
+        x, y, phi = cell.object_pose()
+        cell.place_object(x + 0.25 * along[0], y + 0.25 * along[1], phi)
+        before = cell.object_pose()
         # turns of 120 deg: more than the safety layer's 100 deg a move, made in two
         _, report = fp.rezero(6, heading_step_deg=120.0, heading_range_deg=(-120.0, 120.0))
-        after = devices.cell.object_pose()
-        assert math.hypot(after[0] - before[0], after[1] - before[1]) < 0.3
+        after = cell.object_pose()
+        assert math.hypot(after[0] - before[0], after[1] - before[1]) < 0.4
         assert abs(wrap_deg(after[2] - before[2], 90.0)) < 0.3
-        assert devices.cell.arm_pose() == pytest.approx(fp.state().nominal_pose)
+        assert cell.arm_pose() == pytest.approx(fp.state().nominal_pose)
+        assert math.hypot(after[0] - x, after[1] - y) < 0.06
     table = report["heading_zero"]
     assert list(np.diff(table["headings_deg"])) == pytest.approx([120, 120], abs=0.5)
+    assert len(table["dx_mm"]) == len(table["dy_mm"]) == 3
+    assert max(map(abs, table["dx_mm"] + table["dy_mm"])) < 0.3
     assert ModelBundle.load(state / "model-gabor.fpm").heading_zero.to_info() == table
     args = ["rezero", "--state-dir", str(state), "--config", str(poor), "--frames", "6"]
     assert main(args) == 0

@@ -581,12 +581,20 @@ def test_a_grasp_to_follow_gets_the_converged_step_instead_of_a_move(tmp_path):
 
 
 class LampEstimator(TruthEstimator):
-    """The true step, its turn read off by an offset that follows the tool's heading, as a
-    lamp at the side makes it; ``heading_zero``: the model's zero by heading (None: none)."""
+    """The true step, its turn (and, where the lamp's table has one, its translation) read off
+    by an offset that follows the tool's heading, as a lamp at the side makes it;
+    ``heading_zero``: the model's zero by heading (None: none)."""
 
     def __init__(self, arm, lamp: HeadingZero, heading_zero: HeadingZero | None, **kw):
         super().__init__(arm, **kw)
         self.lamp, self.heading_zero = lamp, heading_zero
+
+    def estimate_translation(self, image):
+        t = super().estimate_translation(image)
+        shift = self.lamp.shift_at(self.arm._pose.approach_rotation_deg)
+        if shift is None:
+            return t
+        return dataclasses.replace(t, dx_mm=t.dx_mm + shift[0], dy_mm=t.dy_mm + shift[1])
 
     def estimate_rotation(self, translation):
         r = super().estimate_rotation(translation)
@@ -616,3 +624,32 @@ def test_the_zero_by_heading_is_taken_off_each_full_look(tmp_path):
             if r.get("heading_zero") is not None]
     assert full, "no full look logged its zero by heading"
     assert full[-1]["heading_zero"] == pytest.approx(lamp.at(full[-1]["heading_deg"]))
+
+
+def test_the_translation_by_heading_is_taken_off_each_full_look(tmp_path):
+    """Where the translation read follows the tool's heading too (a cube under a side lamp),
+    the loop ends off by it with the turn's zero alone, and on the pose with the table's
+    translation; the log keeps both."""
+    headings = tuple(float(h) for h in range(-180, 180, 10))
+    turns = tuple(0.6 * math.sin(math.radians(2 * h)) for h in headings)
+    dx = tuple(0.08 * math.cos(math.radians(4 * h)) + 0.04 for h in headings)
+    dy = tuple(-0.05 * math.sin(math.radians(4 * h)) for h in headings)
+    lamp = HeadingZero(headings, turns, dx, dy)
+    start = ToolStep(6.0, -4.0, 0.0, 12.0)
+    arm, cam, cfg = make(start, max_loops=4.0)
+    turn_only = PositioningLoop(arm, cam, cfg, None, lambda: truth_error(arm)).run(
+        LampEstimator(arm, lamp, HeadingZero(headings, turns)))
+    ex, ey, ephi = turn_only.states[-1].error
+    assert math.hypot(ex, ey) > 0.02 and abs(ephi) < 0.05
+    arm, cam, cfg = make(start, max_loops=4.0)
+    with IterationLog(tmp_path / "it.jsonl") as log:
+        zeroed = PositioningLoop(arm, cam, cfg, log, lambda: truth_error(arm)).run(
+            LampEstimator(arm, lamp, lamp))
+    assert zeroed.outcome == "converged"
+    ex, ey, ephi = zeroed.states[-1].error
+    assert math.hypot(ex, ey) < 0.005 and abs(ephi) < 0.05
+    full = [r for r in map(json.loads, (tmp_path / "it.jsonl").read_text().splitlines())
+            if r.get("heading_zero_mm") is not None]
+    assert full, "no full look logged its translation by heading"
+    assert full[-1]["heading_zero_mm"] == pytest.approx(
+        list(lamp.shift_at(full[-1]["heading_deg"])))

@@ -8,7 +8,7 @@ import math
 import pytest
 
 from calibration_free.errors import TrainingError
-from controller.teach.heading_zero import MAX_HEADINGS, default_range, headings
+from controller.teach.heading_zero import MAX_HEADINGS, centres, default_range, headings
 
 
 def test_a_range_in_even_steps_of_at_most_the_step_both_ends_included():
@@ -16,6 +16,11 @@ def test_a_range_in_even_steps_of_at_most_the_step_both_ends_included():
     assert 0.0 in headings(5.0, (-45.0, 45.0))
     assert headings(40.0, (-45.0, 45.0)) == pytest.approx([-45.0, -15.0, 15.0, 45.0])
     assert headings(500.0, (0.0, 10.0)) == pytest.approx([0.0, 10.0])
+
+
+def test_only_a_part_with_faces_at_right_angles_is_centred_and_its_translation_read():
+    assert centres(4) and centres(8)
+    assert not any(centres(k) for k in (1, 2, 3, 6))
 
 
 def test_the_default_range_is_one_symmetry_period_and_a_whole_turn_less_a_step():
