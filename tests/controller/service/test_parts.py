@@ -149,12 +149,13 @@ def test_a_rezero_job_rewrites_the_parts_model_and_puts_it_in_use(tmp_path, shor
         job = client.call("rezero", wait=True, part="cube", system="align")["job"]
         assert job["outcome"] == "failed" and "no trained align model" in job["reason"], job
         assert service._models.slot("cube").model is now  # the Gabor model stays in use
-        # by heading: the fake gripper closes on nothing, so the first grasp to turn the part
-        # fails the job, and the model in use and its file stay as they were
+        # by heading: the fake gripper closes on nothing, so the first grasp (for the cube: to
+        # centre it at the taught heading) fails the job, and the model in use and its file
+        # stay as they were
         written = (state / "model-gabor.fpm").read_bytes()
         job = client.call("rezero", wait=True, part="cube", frames=3, heading_step=45.0)["job"]
         assert job["outcome"] == "failed", job
-        assert "the grasp to turn the part to -45 deg failed" in job["reason"], job
+        assert "the grasp to centre the part at 0 deg failed" in job["reason"], job
         assert service._models.slot("cube").model is now
         assert (state / "model-gabor.fpm").read_bytes() == written
         with pytest.raises(ServiceError, match="heading_step: must be within"):
