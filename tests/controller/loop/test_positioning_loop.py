@@ -602,28 +602,48 @@ class LampEstimator(TruthEstimator):
             self.arm._pose.approach_rotation_deg))
 
 
+LAMP_START = ToolStep(6.0, -4.0, 0.0, 12.0)
+
+
+def lamp_run(lamp: HeadingZero, zero: HeadingZero | None, log_path=None):
+    """The loop from LAMP_START, reading the lamp's offsets and taking ``zero`` off; returns
+    the result and, with ``log_path``, the iteration log's records."""
+    arm, cam, cfg = make(LAMP_START, max_loops=4.0)
+    log = None if log_path is None else IterationLog(log_path)
+    try:
+        result = PositioningLoop(arm, cam, cfg, log, lambda: truth_error(arm)).run(
+            LampEstimator(arm, lamp, zero))
+    finally:
+        if log is not None:
+            log.close()
+    records = [] if log_path is None else \
+        [json.loads(line) for line in log_path.read_text().splitlines()]
+    return result, records
+
+
+def full_looks_on_the_pose(lamp: HeadingZero, log_path, within_mm: float, key: str) -> list:
+    """The loop with the lamp's own table as the zero converges within ``within_mm`` and
+    0.05 deg; returns its records that logged ``key``."""
+    zeroed, records = lamp_run(lamp, lamp, log_path)
+    assert zeroed.outcome == "converged"
+    ex, ey, ephi = zeroed.states[-1].error
+    assert math.hypot(ex, ey) < within_mm and abs(ephi) < 0.05
+    full = [r for r in records if r.get(key) is not None]
+    assert full, f"no full look logged {key}"
+    return full
+
+
 def test_the_zero_by_heading_is_taken_off_each_full_look(tmp_path):
     """Where NN2 reads a turn that follows the tool's heading, the loop ends turned by it;
     with the model's zero by heading it ends on the pose, and the log keeps the zero."""
     headings = tuple(float(h) for h in range(-180, 180, 10))
     lamp = HeadingZero(headings, tuple(0.6 * math.sin(math.radians(2 * h)) + 0.3
                                        for h in headings))
-    start = ToolStep(6.0, -4.0, 0.0, 12.0)
-    arm, cam, cfg = make(start, max_loops=4.0)
-    plain = PositioningLoop(arm, cam, cfg, None, lambda: truth_error(arm)).run(
-        LampEstimator(arm, lamp, None))
+    plain, _ = lamp_run(lamp, None)
     assert abs(plain.states[-1].error[2]) > 0.2
-    arm, cam, cfg = make(start, max_loops=4.0)
-    with IterationLog(tmp_path / "it.jsonl") as log:
-        zeroed = PositioningLoop(arm, cam, cfg, log, lambda: truth_error(arm)).run(
-            LampEstimator(arm, lamp, lamp))
-    assert zeroed.outcome == "converged"
-    ex, ey, ephi = zeroed.states[-1].error
-    assert math.hypot(ex, ey) < 0.01 and abs(ephi) < 0.05
-    full = [r for r in map(json.loads, (tmp_path / "it.jsonl").read_text().splitlines())
-            if r.get("heading_zero") is not None]
-    assert full, "no full look logged its zero by heading"
+    full = full_looks_on_the_pose(lamp, tmp_path / "it.jsonl", 0.01, "heading_zero")
     assert full[-1]["heading_zero"] == pytest.approx(lamp.at(full[-1]["heading_deg"]))
+    assert full[-1]["heading_zero_mm"] is None  # a table of the turn only
 
 
 def test_the_translation_by_heading_is_taken_off_each_full_look(tmp_path):
@@ -635,21 +655,9 @@ def test_the_translation_by_heading_is_taken_off_each_full_look(tmp_path):
     dx = tuple(0.08 * math.cos(math.radians(4 * h)) + 0.04 for h in headings)
     dy = tuple(-0.05 * math.sin(math.radians(4 * h)) for h in headings)
     lamp = HeadingZero(headings, turns, dx, dy)
-    start = ToolStep(6.0, -4.0, 0.0, 12.0)
-    arm, cam, cfg = make(start, max_loops=4.0)
-    turn_only = PositioningLoop(arm, cam, cfg, None, lambda: truth_error(arm)).run(
-        LampEstimator(arm, lamp, HeadingZero(headings, turns)))
+    turn_only, _ = lamp_run(lamp, HeadingZero(headings, turns))
     ex, ey, ephi = turn_only.states[-1].error
     assert math.hypot(ex, ey) > 0.02 and abs(ephi) < 0.05
-    arm, cam, cfg = make(start, max_loops=4.0)
-    with IterationLog(tmp_path / "it.jsonl") as log:
-        zeroed = PositioningLoop(arm, cam, cfg, log, lambda: truth_error(arm)).run(
-            LampEstimator(arm, lamp, lamp))
-    assert zeroed.outcome == "converged"
-    ex, ey, ephi = zeroed.states[-1].error
-    assert math.hypot(ex, ey) < 0.005 and abs(ephi) < 0.05
-    full = [r for r in map(json.loads, (tmp_path / "it.jsonl").read_text().splitlines())
-            if r.get("heading_zero_mm") is not None]
-    assert full, "no full look logged its translation by heading"
+    full = full_looks_on_the_pose(lamp, tmp_path / "it.jsonl", 0.005, "heading_zero_mm")
     assert full[-1]["heading_zero_mm"] == pytest.approx(
         list(lamp.shift_at(full[-1]["heading_deg"])))
