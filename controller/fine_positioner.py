@@ -18,7 +18,7 @@ import numpy as np
 
 from calibration_free.baselines.align.rezero import rezero_align
 from calibration_free.dataset import Dataset
-from calibration_free.rezero import rezero
+from calibration_free.rezero import CLIPPED_WARN_SHARE, rezero
 from controller.loop.grasp import GraspResult, guarded_grasp
 from controller.loop.iteration_log import IterationLog
 from controller.loop.positioning import PositioningLoop, PositioningResult
@@ -266,6 +266,11 @@ class FinePositioner:
         report = done.report()
         if system == "gabor":
             report["heading_zero"] = None
+            if done.clipped_share > CLIPPED_WARN_SHARE:
+                logger.warning("rezero: the camera clips %.0f%% of the part's pixels at the "
+                               "taught pose in this light (a channel at 255): bring its "
+                               "exposure down until the part's brightest face is not white "
+                               "(README \"Expose for the part\")", 100 * done.clipped_share)
         if heading_step_deg is not None:
             estimator = SYSTEMS[system].estimator(dataclasses.replace(model, model=moved))
             table = read_heading_zero(self, estimator, turns, frames, average)

@@ -144,3 +144,21 @@ def test_the_zero_is_read_on_the_frames_means_as_the_settling_look_reads(saturat
     for bad in (0, -1, 1.5, True):
         with pytest.raises(TrainingError, match="average must be a whole number"):
             rezero(saturation_bundle, moved, average=bad)
+
+
+def test_the_report_tells_the_share_of_the_part_the_camera_clips(saturation_bundle, cell):
+    """A part whose brightest face the camera drives to 255 (an exposure for a dark room
+    under a lamp): the re-zero reports the share of the part's pixels clipped."""
+    frames = at_pose(cell, 4)
+    assert rezero(saturation_bundle, frames).clipped_share == 0.0
+    mask = Perception(saturation_bundle).perceive(frames[0]).localisation.part_mask > 0
+    rows = np.flatnonzero(mask.any(axis=1))
+    top = mask & (np.arange(mask.shape[0])[:, None] < rows[len(rows) // 4])  # its top quarter
+    blown = []
+    for f in frames:
+        f = f.copy()
+        f[top, int(np.argmax(f[top].mean(axis=0)))] = 255  # its strongest channel at 255
+        blown.append(f)
+    done = rezero(saturation_bundle, blown)
+    assert done.clipped_share == pytest.approx(top.sum() / mask.sum(), abs=0.05)
+    assert done.report()["clipped_share"] == round(done.clipped_share, 3)

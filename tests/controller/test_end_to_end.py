@@ -172,13 +172,16 @@ def test_cli_rezero_moves_the_zero_to_the_new_light_and_refuses_a_moved_part(tra
     assert model.read_bytes() == written
 
 
-def test_cli_rezero_by_heading_turns_the_part_and_puts_it_back(trained, tmp_path, capsys):
+def test_cli_rezero_by_heading_turns_the_part_and_puts_it_back(trained, tmp_path, capsys,
+                                                              caplog):
     """`finepos rezero --heading-step`: the arm grasps the cube, turns it, sets it down,
     centres it with the jaws a quarter turn on and looks at each heading; the model keeps the
     zero by heading, the turn and the translation, and the part lies back at its taught
     heading, in the middle of the taught pose's jaws (it lay 0.25 mm along them off it), the
     arm at the taught pose; a plain rezero drops the table; bad options are refused in one
-    line before the arm moves."""
+    line before the arm moves. Under the poor light's lamp the camera, exposed for the dark
+    room, clips the cube's lit face: the report says how much, and a warning says what to
+    do."""
     import shutil
 
     from calibration_free.bundle import ModelBundle
@@ -202,6 +205,8 @@ def test_cli_rezero_by_heading_turns_the_part_and_puts_it_back(trained, tmp_path
         assert abs(wrap_deg(after[2] - before[2], 90.0)) < 0.3
         assert cell.arm_pose() == pytest.approx(fp.state().nominal_pose)
         assert math.hypot(after[0] - x, after[1] - y) < 0.06
+    assert report["clipped_share"] > 0.05
+    assert "bring its exposure down" in caplog.text
     table = report["heading_zero"]
     assert list(np.diff(table["headings_deg"])) == pytest.approx([120, 120], abs=0.5)
     assert len(table["dx_mm"]) == len(table["dy_mm"]) == 3
