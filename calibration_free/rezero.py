@@ -54,7 +54,7 @@ NN2_MIN_DEG = 1.0
 MIN_FOUND_SHARE = 0.75
 # More of the part's pixels clipped than this: the camera's exposure should come down
 # (``FinePositioner.rezero`` warns).
-CLIPPED_WARN_SHARE = 0.02
+CLIPPED_WARN_SHARE = 0.05
 
 
 @dataclass(frozen=True)
