@@ -237,7 +237,9 @@ def register(subparsers) -> None:
                     "align: take the servo's template again there). A reading over "
                     f"{MAX_SHIFT_MM:g} mm or "
                     f"{MAX_TURN_DEG:g} deg there is refused: the part is not where it was "
-                    "taught, or the camera moved.\n\n"
+                    "taught, or the camera moved. The report's clipped_share is the share of "
+                    "the part's pixels with a channel at 255 there; over 5% a warning says to "
+                    "bring the camera's exposure down (README \"Expose for the part\").\n\n"
                     "Also: finepos rezero --heading-step 5\n\n"
                     "--heading-step DEG: then also read the zero by heading (gabor): a lamp "
                     "at the side lights the part from another side at each heading, and the "
@@ -249,9 +251,9 @@ def register(subparsers) -> None:
                     "screw), and puts it back; for the cube it also closes the jaws on it "
                     "turned by a quarter turn after each set-down, which centres it, and reads "
                     "the translation as well. The loop then takes the zero at the tool's "
-                    "heading off each full look's step. About 7 s a heading (12 s for the "
-                    "cube); the gripper must be able to grasp the part there. A plain rezero "
-                    "drops the zero by heading (it belongs to the old light).")
+                    "heading off each full look's step. About 9 s a heading (20 s for the "
+                    "cube, centred too); the gripper must be able to grasp the part there. "
+                    "A plain rezero drops the zero by heading (it belongs to the old light).")
     add_config_option(p)
     add_device_options(p)
     add_part_option(p, TAUGHT_PART_HELP)
