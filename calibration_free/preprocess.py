@@ -139,9 +139,14 @@ def mean_frame(images: list[np.ndarray]) -> np.ndarray:
     return ((total + len(images) // 2) // len(images)).astype(np.uint8)
 
 
+def frame_groups(images: Sequence[np.ndarray], average: int) -> list[list[np.ndarray]]:
+    """Consecutive groups of ``average`` frames, the last one maybe smaller."""
+    return [list(images[i:i + average]) for i in range(0, len(images), average)]
+
+
 def frame_means(images: Sequence[np.ndarray], average: int) -> list[np.ndarray]:
-    """The means (``mean_frame``) of consecutive groups of ``average`` frames, the last one
-    maybe smaller, as a settling look reads them; ``average`` 1: the frames themselves."""
+    """The means (``mean_frame``) of ``frame_groups``, as a settling look reads them;
+    ``average`` 1: the frames themselves."""
     if average == 1:
         return list(images)
-    return [mean_frame(list(images[i:i + average])) for i in range(0, len(images), average)]
+    return [mean_frame(group) for group in frame_groups(images, average)]

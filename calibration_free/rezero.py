@@ -42,7 +42,7 @@ from calibration_free.errors import TrainingError
 from calibration_free.perception import Perception
 from calibration_free.pin import pinned
 from calibration_free.pin import whole as seen_whole_part
-from calibration_free.preprocess import frame_means
+from calibration_free.preprocess import frame_groups, frame_means
 
 # A reading at the taught pose beyond these is not a change of light (a quarter pixel is about
 # 0.25 mm): the part is not where it was taught, or the camera was knocked.
@@ -103,15 +103,14 @@ def rezero(bundle: ModelBundle, images: Sequence[np.ndarray], average: int = 1) 
     require_frames(images)
     if isinstance(average, bool) or not isinstance(average, int) or average < 1:
         raise TrainingError(f"rezero: average must be a whole number >= 1, got {average!r}")
-    frames, raw = len(images), images
+    frames, groups = len(images), frame_groups(images, average)
     images = frame_means(images, average)
     perception = Perception(bundle)
     percepts = [perception.perceive(image) for image in images]
     whole = [i for i, p in enumerate(percepts) if seen_whole_part(p)]
-    used = sum(min(average, frames - i * average) for i in whole)
+    used = sum(len(groups[i]) for i in whole)
     require_seen_whole(used, frames)
-    clipped = clipped_share([(raw[i * average:(i + 1) * average],
-                              percepts[i].localisation.part_mask) for i in whole])
+    clipped = clipped_share([(groups[i], percepts[i].localisation.part_mask) for i in whole])
     nn2_deg, turned = None, False
     if bundle.axis is None:  # NN2 first: the translation nets read its (sin, cos)
         kappa = bundle.kappa
