@@ -92,6 +92,13 @@ class LoopConfig:
     ``settle_deg`` (the loop is settling at the taught pose) reads this many frames (1: every
     look reads one frame, the paper's loop): near the pose the readings' frame-to-frame noise
     is as large as what is left to correct, in a dim frame more so;
+    settle_max_frames / settle_sem_mm / settle_sem_deg: after its ``settle_frames`` such a
+    look reads more frames, up to ``settle_max_frames`` in all, while the standard error of
+    the mean step (each axis' frame-to-frame standard deviation over the root of the frames
+    read) is above ``settle_sem_mm`` in x or y or ``settle_sem_deg`` in the turn: a noisy
+    camera (a high gain in a dim cell) gets the frames it needs, a quiet one is not slowed
+    (None: that axis sets no bound; both None, the default: ``settle_frames`` frames,
+    always; README change 29 has what 0.025 mm and 0.1 deg measured);
     settle_average: how those frames make one step: ``frames``, the step read from their
     mean frame (the camera's noise averaged out before the part's edge is read: in a dim
     frame's shadows some noisy pixels join the part's blob, which moves its centre one way
@@ -137,6 +144,11 @@ class LoopConfig:
     settle_frames: int = field(default=3, metadata={"min": 1, "max": 32})
     settle_mm: float = field(default=0.5, metadata={"min": 0.0})
     settle_deg: float = field(default=2.0, metadata={"min": 0.0})
+    settle_max_frames: int = field(default=16, metadata={"min": 1, "max": 64})
+    settle_sem_mm: float | None = field(default=None, metadata={"min": 0.0,
+                                                                "exclusive_min": True})
+    settle_sem_deg: float | None = field(default=None, metadata={"min": 0.0,
+                                                                 "exclusive_min": True})
     settle_average: Literal["frames", "steps"] = "frames"
     turn_check_deg: float | None = field(default=10.0, metadata={"min": 0.0})
     turn_check_share: float = field(default=0.4, metadata={"min": 0.0, "max": 1.0})
@@ -145,6 +157,25 @@ class LoopConfig:
     look_around_below: float | None = field(default=0.6, metadata={"min": 0.0, "max": 1.0})
     turn_in_commands: bool = True
     save_images: bool = False
+
+    def settle_count(self, scatter: tuple[float, float, float] | None) -> int:
+        """The frames a settling look reads where single frames' steps scatter by
+        ``scatter`` (standard deviations: mm, mm, deg): the fewest from ``settle_frames`` on
+        whose mean meets ``settle_sem_mm`` / ``settle_sem_deg``, at most
+        ``settle_max_frames`` (None: not known, ``settle_frames``)."""
+        if scatter is None:
+            return self.settle_frames
+        need = float(self.settle_frames)
+        for sd, bound in ((max(scatter[0], scatter[1]), self.settle_sem_mm),
+                          (scatter[2], self.settle_sem_deg)):
+            if bound is not None:
+                need = max(need, (sd / bound) ** 2)
+        return min(self.settle_max_frames, math.ceil(need - 1e-9))
+
+    def __post_init__(self) -> None:
+        if self.settle_max_frames < self.settle_frames:
+            raise ValueError(f"settle_max_frames: {self.settle_max_frames} is below "
+                             f"settle_frames ({self.settle_frames})")
 
 
 @dataclass(frozen=True)
@@ -191,6 +222,26 @@ class PositioningResult:
     def carried_dropped(self) -> None:
         """The ``carried`` step was not made (the arm moved before the grasp)."""
         self.reason = self.reason.replace(CARRIED, ", not made (the arm moved before the grasp)")
+
+
+def step_scatter(steps: list[ToolStep]) -> tuple[float, float, float] | None:
+    """The sample standard deviation of ``steps`` in x, y (mm) and the turn (deg); None
+    below two."""
+    if len(steps) < 2:
+        return None
+    values = np.array([(s.dx_mm, s.dy_mm, s.dphi_deg) for s in steps])
+    sd = values.std(axis=0, ddof=1)
+    return float(sd[0]), float(sd[1]), float(sd[2])
+
+
+def _standard_errors(steps: list[ToolStep]) -> tuple[float, float, float] | None:
+    """The standard error of the mean of ``steps`` in x, y (mm) and the turn (deg): each
+    axis' sample standard deviation over the root of their number; None below two."""
+    sd = step_scatter(steps)
+    if sd is None:
+        return None
+    root = math.sqrt(len(steps))
+    return sd[0] / root, sd[1] / root, sd[2] / root
 
 
 def _less(step: ToolStep, zero: ToolStep | None) -> ToolStep:
@@ -457,17 +508,21 @@ class PositioningLoop:
 
     def _settle(self, estimator: Estimator, first: ToolStep, record: IterationRecord,
                 image: np.ndarray, zero: ToolStep | None) -> ToolStep:
-        """One step from ``first`` (read on ``image``) and ``settle_frames - 1`` more frames
-        (``settle_average``). A frame where the part is not found, or whose step is outside
-        the settle window (``settle_mm``, ``settle_deg``; a misreading), is left out. The
-        record keeps every frame's step (``settle``, the first one first; null where not
-        found) and the mean frame's (``settle_mean_frame``). Where the mean frame reads no
-        part or a step outside the window, the frames' mean step is taken. Every frame's
-        step has the look's ``zero`` (``_heading_zero``) taken off."""
+        """One step from ``first`` (read on ``image``) and ``settle_frames - 1`` more frames,
+        and more while their mean step is not known to ``settle_sem_mm`` / ``settle_sem_deg``
+        (``settle_max_frames`` in all; ``settle_average``). A frame where the part is not
+        found, or whose step is outside the settle window (``settle_mm``, ``settle_deg``; a
+        misreading), is left out. The record keeps every frame's step (``settle``, the first
+        one first; null where not found), the standard error of their mean step
+        (``settle_sem``: mm, mm, deg; null below two frames) and the mean frame's step
+        (``settle_mean_frame``). Where the mean frame reads no part or a step outside the
+        window, the frames' mean step is taken. Every frame's step has the look's ``zero``
+        (``_heading_zero``) taken off."""
         cfg = self.config
         steps, images = [first], [image]
         read = [[first.dx_mm, first.dy_mm, first.dphi_deg]]
-        for _ in range(cfg.settle_frames - 1):
+        while len(read) < cfg.settle_frames or (
+                len(read) < cfg.settle_max_frames and not self._known(steps)):
             image = self.camera.grab().image
             step = self._full_step(estimator, image, zero)
             if step is None:
@@ -478,6 +533,8 @@ class PositioningLoop:
                 steps.append(step)
                 images.append(image)
         record.estimates["settle"] = read
+        sem = _standard_errors(steps)
+        record.estimates["settle_sem"] = None if sem is None else list(sem)
         if cfg.settle_average == "frames" and len(images) > 1:
             step = self._full_step(estimator, mean_frame(images), zero)
             record.estimates["settle_mean_frame"] = None if step is None else \
@@ -513,6 +570,19 @@ class PositioningLoop:
             return None
         dx, dy = shift or (0.0, 0.0)
         return ToolStep(dx, dy, 0.0, turn)
+
+    def _known(self, steps: list[ToolStep]) -> bool:
+        """Whether the mean of ``steps`` is known to ``settle_sem_mm`` in x and y and
+        ``settle_sem_deg`` in the turn (bounds that are None hold; below two steps, with a
+        bound, it is not known)."""
+        cfg = self.config
+        if cfg.settle_sem_mm is None and cfg.settle_sem_deg is None:
+            return True
+        sem = _standard_errors(steps)
+        if sem is None:
+            return False
+        return (cfg.settle_sem_mm is None or max(sem[0], sem[1]) <= cfg.settle_sem_mm) and \
+            (cfg.settle_sem_deg is None or sem[2] <= cfg.settle_sem_deg)
 
     def _settling(self, step: ToolStep) -> bool:
         cfg = self.config

@@ -13,11 +13,15 @@ from calibration_free.preprocess import mean_frame
 from controller.loop.iteration_log import IterationLog, read_log
 from controller.loop.positioning import LoopConfig, PositioningLoop
 from controller.systems.estimator import TranslationEstimate
-from drivers.core.errors import MotionRejectedError
+from drivers.core.errors import ConfigError, MotionRejectedError
 from drivers.core.pose import ToolStep, wrap_deg
+from drivers.core.typed_config import from_mapping
 from drivers.safety import SafetyLimits
 from tests.controller.loop.loop_fixtures import NOMINAL, TruthEstimator, truth_error
 from tests.mocks.fakes import FakeArm, FakeCamera
+
+# a settling look that reads exactly ``settle_frames`` frames, however they scatter
+FIXED = {"settle_sem_mm": None, "settle_sem_deg": None}
 
 
 def make(offset: ToolStep, limits=None, **cfg):
@@ -329,7 +333,8 @@ def test_settling_looks_average_their_frames(tmp_path):
     arm, cam, cfg = make(start, max_loops=4.0, settle_frames=1)
     alone = PositioningLoop(arm, cam, cfg).run(NoisyEstimator(arm, errors))
     assert alone.outcome == "budget"
-    arm, cam, cfg = make(start, max_loops=4.0, settle_frames=2, settle_average="steps")
+    arm, cam, cfg = make(start, max_loops=4.0, settle_frames=2, settle_average="steps",
+                         **FIXED)
     est = NoisyEstimator(arm, errors)
     with IterationLog(tmp_path / "it.jsonl") as log:
         settled = PositioningLoop(arm, cam, cfg, log, lambda: truth_error(arm)).run(est)
@@ -368,6 +373,76 @@ def test_only_settling_looks_read_more_frames(tmp_path):
     assert est.frames == 1 + 4 * (len(records) - 1)
 
 
+def _settle_log(tmp_path, errors, **cfg):
+    """The first look's record and the result of a loop from 0.2 mm / 0.5 deg off whose
+    frames read the truth plus ``errors`` (cycled; their mean step is taken)."""
+    arm, cam, config = make(ToolStep(0.2, 0.1, 0.0, 0.5), max_loops=4.0,
+                            settle_average="steps", **cfg)
+    est = NoisyEstimator(arm, errors)
+    path = tmp_path / f"it-{len(list(tmp_path.glob('it-*.jsonl')))}.jsonl"
+    with IterationLog(path) as log:
+        result = PositioningLoop(arm, cam, config, log, lambda: truth_error(arm)).run(est)
+    return read_log(path)[0], result
+
+
+def test_a_noisy_settling_look_reads_frames_until_its_mean_is_known(tmp_path):
+    """Frames scattering +-0.08 mm in x: the look reads on past its three frames until the
+    standard error of the mean step is within 0.025 mm (sd 0.08: 11 frames), no further."""
+    errors = [(0.08, 0.0, 0.0), (-0.08, 0.0, 0.0)]
+    first, result = _settle_log(tmp_path, errors, settle_frames=3, settle_max_frames=16,
+                                settle_sem_mm=0.025, settle_sem_deg=0.1)
+    n = len(first["settle"])
+    xs = np.array([s[0] for s in first["settle"]])
+    assert 3 < n < 16
+    sem = xs.std(ddof=1) / np.sqrt(n)
+    assert first["settle_sem"][0] == pytest.approx(sem) and sem <= 0.025
+    previous = xs[:-1].std(ddof=1) / np.sqrt(n - 1)
+    assert previous > 0.025  # it stopped at the first frame that brought it within
+    assert result.outcome == "converged"
+    assert max(abs(e) for e in result.states[-1].error) < 1e-6  # +-0.08 in even numbers
+
+
+def test_a_quiet_settling_look_reads_only_its_frames(tmp_path):
+    errors = [(0.004, -0.003, 0.02), (-0.004, 0.003, -0.02)]
+    first, _ = _settle_log(tmp_path, errors, settle_frames=3, settle_max_frames=16)
+    assert len(first["settle"]) == 3
+    assert max(first["settle_sem"][:2]) <= 0.025 and first["settle_sem"][2] <= 0.1
+
+
+@pytest.mark.parametrize("axis, bound", [(1, {"settle_sem_mm": 0.025}),
+                                         (2, {"settle_sem_deg": 0.1})])
+def test_each_axis_bound_keeps_a_settling_look_reading(axis, bound, tmp_path):
+    """y scattering +-0.3 mm, or the turn +-1.5 deg: that axis' bound alone keeps the look
+    reading to its cap; with only the other axis bounded it reads its three frames."""
+    big = [0.0, 0.0, 0.0]
+    big[axis] = 0.3 if axis == 1 else 1.5
+    errors = [tuple(big), tuple(-v for v in big)]
+    other = {"settle_sem_mm": None, "settle_sem_deg": None}
+    first, _ = _settle_log(tmp_path, errors, settle_frames=3, settle_max_frames=9,
+                           **{**other, **bound})
+    assert len(first["settle"]) == 9
+    first, _ = _settle_log(tmp_path, errors, settle_frames=3, settle_max_frames=9,
+                           **{**other, **{k: (0.025 if "mm" in k else 0.1)
+                                          for k in other if k not in bound}})
+    assert len(first["settle"]) == 3
+
+
+def test_frames_without_the_part_count_towards_the_cap(tmp_path):
+    """Only the first frame shows the part: the look cannot know its mean and stops at
+    settle_max_frames, moving by the one frame it has."""
+    first, result = _settle_log(tmp_path, [(0.0, 0.0, 0.0)] + [None] * 20, settle_frames=3,
+                                settle_max_frames=6)
+    assert len(first["settle"]) == 6 and first["settle"][1:] == [None] * 5
+    assert first["settle_sem"] is None
+
+
+def test_settle_max_frames_below_settle_frames_is_refused():
+    with pytest.raises(ConfigError, match=r"controller\.loop: settle_max_frames: 2 is below "
+                                          r"settle_frames \(3\)"):
+        from_mapping(LoopConfig, {"settle_frames": 3, "settle_max_frames": 2},
+                     "controller.loop")
+
+
 class SpeckleEstimator(TruthEstimator):
     """Reads the true step, 0.2 mm too far in x in a frame whose noise lifts its first pixel
     above 105 (noise pixels that join the part's blob: a bias one way, as in a dim frame's
@@ -392,7 +467,7 @@ def test_a_settling_look_reads_its_mean_frame(average, tmp_path):
     """Frames at 110, 90 and 100 (noise): one in three reads 0.2 mm off; their mean frame
     (100) reads the truth, the mean of their steps keeps a third of the bias."""
     arm, _, cfg = make(ToolStep(0.2, 0.1, 0.0, 0.5), max_loops=4.0, settle_frames=3,
-                       settle_average=average)
+                       settle_average=average, **FIXED)
     cam = _cycling_camera([100, 110, 90])
     with IterationLog(tmp_path / "it.jsonl") as log:
         result = PositioningLoop(arm, cam, cfg, log, lambda: truth_error(arm)).run(
@@ -661,3 +736,21 @@ def test_the_translation_by_heading_is_taken_off_each_full_look(tmp_path):
     full = full_looks_on_the_pose(lamp, tmp_path / "it.jsonl", 0.005, "heading_zero_mm")
     assert full[-1]["heading_zero_mm"] == pytest.approx(
         list(lamp.shift_at(full[-1]["heading_deg"])))
+
+
+@pytest.mark.parametrize("scatter, count", [
+    (None, 3),                       # not known: settle_frames
+    ((0.012, 0.007, 0.046), 3),      # good light's single frames: three are enough
+    ((0.079, 0.049, 0.25), 10),      # the poor lamp's: x wants (0.079 / 0.025)^2 = 10
+    ((0.01, 0.01, 0.35), 13),        # the turn alone: (0.35 / 0.1)^2 = 12.25
+    ((0.2, 0.0, 0.0), 16),           # capped at settle_max_frames
+])
+def test_settle_count_is_the_frames_the_rule_takes(scatter, count):
+    cfg = LoopConfig(settle_frames=3, settle_max_frames=16, settle_sem_mm=0.025,
+                     settle_sem_deg=0.1)
+    assert cfg.settle_count(scatter) == count
+
+
+def test_settle_count_without_bounds_is_settle_frames():
+    cfg = LoopConfig(settle_frames=4, settle_max_frames=16, **FIXED)
+    assert cfg.settle_count((1.0, 1.0, 10.0)) == 4
