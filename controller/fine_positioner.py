@@ -21,8 +21,9 @@ from calibration_free.dataset import Dataset
 from calibration_free.rezero import CLIPPED_WARN_SHARE, rezero
 from controller.loop.grasp import GraspResult, guarded_grasp
 from controller.loop.iteration_log import IterationLog
-from controller.loop.positioning import PositioningLoop, PositioningResult
+from controller.loop.positioning import PositioningLoop, PositioningResult, step_scatter
 from controller.systems.base import TrainedModel
+from controller.systems.estimator import full_step
 from controller.systems.registry import SYSTEMS
 from controller.teach.acquisition import acquire, grid_for, random_set, transfer
 from controller.teach.cell_state import CellState
@@ -37,7 +38,9 @@ logger = logging.getLogger(__name__)
 REZERO_SYSTEMS = ("gabor", "align")
 # Frames ``rezero`` takes at the taught pose (training pinned the nets on 4 + 4): read three
 # at a time, eight means; fewer leave more of the dark frame's noise in the zero (README
-# "Re-zero in the cell's light"). 0.8 s at 30 frames a second.
+# "Re-zero in the cell's light"). 0.8 s at 30 frames a second. Where the loop's settling look
+# reads more frames at a time in that light (``LoopConfig.settle_count``) it takes more, so
+# that two such means fit.
 REZERO_FRAMES = 24
 
 DATASETS = ("nn1", "nn2", "test")
@@ -214,10 +217,12 @@ class FinePositioner:
                heading_range_deg: tuple[float, float] | None = None
                ) -> tuple[TrainedModel, dict]:
         """Re-zero the part's model of ``system`` in the cell's light: move to the taught
-        pose, take ``frames`` frames, move the model's zero there (Gabor: shift the
+        pose, take ``frames`` frames (more where two of the means below need them), move the
+        model's zero there (Gabor: shift the
         translation nets, ``calibration_free.rezero``, read on the frames' means as the
-        loop's settling look reads, ``controller.loop.settle_frames`` at a time where
-        ``settle_average`` is ``frames``; the image-alignment servo: take its
+        loop's settling look reads where ``settle_average`` is ``frames``: as many at a time
+        as it reads where single frames scatter as these do, ``LoopConfig.settle_count``;
+        the image-alignment servo: take its
         template again, ``calibration_free.baselines.align.rezero``), store the model
         (atomically) and use it. The part must lie where it was taught.
 
@@ -231,8 +236,10 @@ class FinePositioner:
 
         Returns:
             The model and what moved (the report's ``shift_mm``: each Gabor net's reading
-            before, mm; ``read_mm`` / ``read_deg``: the servo's; ``heading_zero``: the zero
-            by heading, or null).
+            before, mm; ``read_mm`` / ``read_deg``: the servo's; ``frame_scatter``: how far
+            single frames' steps scatter there, standard deviations mm, mm, deg, Gabor;
+            ``average``: the frames a mean is read on; ``heading_zero``: the zero by heading,
+            or null).
 
         Raises:
             FineposError: no model of ``system`` stored, a system that does not re-zero,
@@ -255,7 +262,16 @@ class FinePositioner:
         self.move_to(self.state().nominal_pose)
         images = [self.devices.camera.grab().image for _ in range(frames)]
         loop = self.config.controller.loop
-        average = loop.settle_frames if loop.settle_average == "frames" else 1
+        average, scatter = 1, None
+        if system == "gabor":
+            estimator = SYSTEMS[system].estimator(model)
+            scatter = step_scatter([step for step in (full_step(estimator, image)
+                                                      for image in images) if step is not None])
+            if loop.settle_average == "frames":
+                average = loop.settle_count(scatter)
+                images += [self.devices.camera.grab().image
+                           for _ in range(2 * average - len(images))]
+                frames = len(images)  # each heading's reading takes as many
         if system == "align":
             done = rezero_align(model.model, images)
             moved = done.model
@@ -265,6 +281,8 @@ class FinePositioner:
             moved = done.bundle
         report = done.report()
         if system == "gabor":
+            report["frame_scatter"] = None if scatter is None else [round(v, 4)
+                                                                     for v in scatter]
             report["heading_zero"] = None
             if done.clipped_share > CLIPPED_WARN_SHARE:
                 logger.warning("rezero: the camera clips %.0f%% of the part's pixels at the "

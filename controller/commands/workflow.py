@@ -230,8 +230,9 @@ def register(subparsers) -> None:
         description="Example: finepos rezero\n\nAfter the light changed (a lamp moved, the "
                     "room dimmed): with the part where it was taught, move to the taught "
                     "pose, take --frames frames and shift the translation nets to read zero "
-                    "there (on the frames' means, controller.loop.settle_frames at a time, as "
-                    "the loop's settling look reads), and turn NN2 back where it reads "
+                    "there (on the frames' means, as many at a time as the loop's settling "
+                    "look reads where single frames scatter as these do: the report's "
+                    "frame_scatter, mm, mm, deg, and average), and turn NN2 back where it reads "
                     f"{NN2_MIN_DEG:g} deg or more there (the Gabor model in the part's "
                     "state folder, rewritten atomically; no new acquisition; --system "
                     "align: take the servo's template again there). A reading over "
@@ -258,7 +259,9 @@ def register(subparsers) -> None:
     add_device_options(p)
     add_part_option(p, TAUGHT_PART_HELP)
     p.add_argument("--frames", type=int, default=REZERO_FRAMES,
-                   help=f"frames at the taught pose (default {REZERO_FRAMES})")
+                   help=f"frames at the taught pose (default {REZERO_FRAMES}; more where two "
+                        "of the settling look's means need them, see controller.loop."
+                        "settle_sem_mm)")
     p.add_argument("--system", default="gabor", choices=REZERO_SYSTEMS,
                    help="the model to re-zero: gabor (the default) or align (the "
                         "image-alignment servo)")
