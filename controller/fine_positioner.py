@@ -269,9 +269,10 @@ class FinePositioner:
                                                       for image in images) if step is not None])
             if loop.settle_average == "frames":
                 average = loop.settle_count(scatter)
-                images += [self.devices.camera.grab().image
-                           for _ in range(2 * average - len(images))]
-                frames = len(images)  # each heading's reading takes as many
+                if average > loop.settle_frames:  # the bounds ask for more: two means
+                    images += [self.devices.camera.grab().image
+                               for _ in range(2 * average - len(images))]
+                    frames = len(images)  # each heading's reading takes as many
         if system == "align":
             done = rezero_align(model.model, images)
             moved = done.model

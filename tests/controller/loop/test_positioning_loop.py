@@ -431,7 +431,7 @@ def test_frames_without_the_part_count_towards_the_cap(tmp_path):
     """Only the first frame shows the part: the look cannot know its mean and stops at
     settle_max_frames, moving by the one frame it has."""
     first, result = _settle_log(tmp_path, [(0.0, 0.0, 0.0)] + [None] * 20, settle_frames=3,
-                                settle_max_frames=6)
+                                settle_max_frames=6, settle_sem_mm=0.025)
     assert len(first["settle"]) == 6 and first["settle"][1:] == [None] * 5
     assert first["settle_sem"] is None
 
