@@ -22,9 +22,12 @@ multiple of 4: the cube) the arm centres it instead: after each set-down it goes
 turned by a quarter turn and closes the jaws on the other pair of faces (the grasp's descent
 and guards, no lift), which pushes the part to the middle along the jaws of the set-down, as
 the set-down's grasp did across them; it does the same at the taught heading before the first
-reading and after the last. What each heading reads less the mean of those two readings is
-its zero of the translation. The part then lies where the arm's repeatability puts it (on
-the simulated cell within 0.01-0.03 mm of the jaws' middle), whatever the set-downs before.
+reading and after the last (those two are logged: what the centring moved the part by). What
+each heading reads, against the plain re-zero's zero (the part where it was taught), is its
+zero of the translation. The part then lies where the arm's repeatability puts it (on the
+simulated cell within 0.01-0.03 mm of the jaws' middle), whatever the set-downs before; each
+centring scatters by that much, so a reference taken from the two centrings at the taught
+heading would put their common error into every heading's zero (change 30 in the README).
 For the other parts the translation is not read.
 
 Each heading costs a grasp, a turn, a set-down and a look: about 9 cell seconds with the
@@ -159,7 +162,7 @@ def read_heading_zero(fp, estimator, turns: Sequence[float], frames: int,
 
     if square:
         centre(0.0)
-    before = _step_read(fp, estimator, frames, average, 0.0)  # the part where it was taught
+    before = _step_read(fp, estimator, frames, average, 0.0)  # centred where it was taught
     readings = []  # (heading, step read, set-downs before)
     for turn in turns:
         if set_down_at(turn) and square:
@@ -170,7 +173,6 @@ def read_heading_zero(fp, estimator, turns: Sequence[float], frames: int,
         centre(0.0)
     after = _step_read(fp, estimator, frames, average, 0.0)
     drift = (after.dphi_deg - before.dphi_deg) / max(set_downs, 1)  # a set-down's
-    ref_x, ref_y = ((before.dx_mm + after.dx_mm) / 2.0, (before.dy_mm + after.dy_mm) / 2.0)
     logger.info("rezero: %d set-downs turned the part by %.3f deg each", set_downs, drift)
     if square:
         logger.info("rezero: centred at the taught heading the translation read (%.3f, %.3f)"
@@ -180,7 +182,7 @@ def read_heading_zero(fp, estimator, turns: Sequence[float], frames: int,
     for heading, read, count in readings:
         row = (heading, read.dphi_deg - count * drift)
         if square:
-            row += (read.dx_mm - ref_x, read.dy_mm - ref_y)
+            row += (read.dx_mm, read.dy_mm)  # against the plain zero: the part as taught
         closed.append(row)
         logger.info("rezero: at heading %.1f deg the taught pose reads %s", heading,
                     ", ".join(f"{v:.3f}" for v in row[1:]))
