@@ -38,7 +38,7 @@ from controller.service.protocol import (
 
 logger = logging.getLogger(__name__)
 
-STREAM_POLL_S = 0.5  # how often an idle stream checks whether its client or the service left
+STREAM_POLL_S = 0.05  # how often an idle stream checks whether its client or the service left
 AUTH_TIMEOUT_S = 10.0  # a TCP connection that has not authenticated by then is closed
 
 
