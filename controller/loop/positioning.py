@@ -158,19 +158,29 @@ class LoopConfig:
     turn_in_commands: bool = True
     save_images: bool = False
 
+    def settle_known(self, sem: tuple[float, float, float] | None) -> bool:
+        """Whether a mean step whose standard errors are ``sem`` (mm, mm, deg; None: below
+        two frames) is known to ``settle_sem_mm`` in x and y and ``settle_sem_deg`` in the
+        turn: a bound that is None holds; without bounds every mean is known."""
+        if self.settle_sem_mm is None and self.settle_sem_deg is None:
+            return True
+        if sem is None:
+            return False
+        return (self.settle_sem_mm is None or max(sem[0], sem[1]) <= self.settle_sem_mm) \
+            and (self.settle_sem_deg is None or sem[2] <= self.settle_sem_deg)
+
     def settle_count(self, scatter: tuple[float, float, float] | None) -> int:
         """The frames a settling look reads where single frames' steps scatter by
         ``scatter`` (standard deviations: mm, mm, deg): the fewest from ``settle_frames`` on
-        whose mean meets ``settle_sem_mm`` / ``settle_sem_deg``, at most
-        ``settle_max_frames`` (None: not known, ``settle_frames``)."""
+        whose mean is ``settle_known``, at most ``settle_max_frames`` (None: not known,
+        ``settle_frames``)."""
         if scatter is None:
             return self.settle_frames
-        need = float(self.settle_frames)
-        for sd, bound in ((max(scatter[0], scatter[1]), self.settle_sem_mm),
-                          (scatter[2], self.settle_sem_deg)):
-            if bound is not None:
-                need = max(need, (sd / bound) ** 2)
-        return min(self.settle_max_frames, math.ceil(need - 1e-9))
+        for n in range(self.settle_frames, self.settle_max_frames):
+            root = math.sqrt(n)
+            if self.settle_known((scatter[0] / root, scatter[1] / root, scatter[2] / root)):
+                return n
+        return self.settle_max_frames
 
     def __post_init__(self) -> None:
         if self.settle_max_frames < self.settle_frames:
@@ -572,17 +582,9 @@ class PositioningLoop:
         return ToolStep(dx, dy, 0.0, turn)
 
     def _known(self, steps: list[ToolStep]) -> bool:
-        """Whether the mean of ``steps`` is known to ``settle_sem_mm`` in x and y and
-        ``settle_sem_deg`` in the turn (bounds that are None hold; below two steps, with a
-        bound, it is not known)."""
-        cfg = self.config
-        if cfg.settle_sem_mm is None and cfg.settle_sem_deg is None:
-            return True
-        sem = _standard_errors(steps)
-        if sem is None:
-            return False
-        return (cfg.settle_sem_mm is None or max(sem[0], sem[1]) <= cfg.settle_sem_mm) and \
-            (cfg.settle_sem_deg is None or sem[2] <= cfg.settle_sem_deg)
+        """Whether the mean of ``steps`` is known to the settle bounds
+        (``LoopConfig.settle_known``)."""
+        return self.config.settle_known(_standard_errors(steps))
 
     def _settling(self, step: ToolStep) -> bool:
         cfg = self.config
