@@ -217,7 +217,8 @@ class FinePositioner:
                heading_range_deg: tuple[float, float] | None = None
                ) -> tuple[TrainedModel, dict]:
         """Re-zero the part's model of ``system`` in the cell's light: move to the taught
-        pose, take ``frames`` frames (more where two of the means below need them), move the
+        pose, take ``frames`` frames (more where the means below need them: at least two, all
+        whole), move the
         model's zero there (Gabor: shift the
         translation nets, ``calibration_free.rezero``, read on the frames' means as the
         loop's settling look reads where ``settle_average`` is ``frames``: as many at a time
@@ -269,9 +270,11 @@ class FinePositioner:
                                                       for image in images) if step is not None])
             if loop.settle_average == "frames":
                 average = loop.settle_count(scatter)
-                if average > loop.settle_frames:  # the bounds ask for more: two means
+                if average > loop.settle_frames:  # the bounds ask for more: at least
+                    # two means, and whole ones (a short last mean reads differently)
+                    need = average * max(2, math.ceil(len(images) / average))
                     images += [self.devices.camera.grab().image
-                               for _ in range(2 * average - len(images))]
+                               for _ in range(need - len(images))]
                     frames = len(images)  # each heading's reading takes as many
         if system == "align":
             done = rezero_align(model.model, images)
