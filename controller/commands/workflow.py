@@ -259,9 +259,9 @@ def register(subparsers) -> None:
     add_device_options(p)
     add_part_option(p, TAUGHT_PART_HELP)
     p.add_argument("--frames", type=int, default=REZERO_FRAMES,
-                   help=f"frames at the taught pose (default {REZERO_FRAMES}; more where two "
-                        "of the settling look's means need them, see controller.loop."
-                        "settle_sem_mm)")
+                   help=f"frames at the taught pose (default {REZERO_FRAMES}; more where the "
+                        "settling look's bounds ask for more frames a mean: two whole means "
+                        "at least, see controller.loop.settle_sem_mm)")
     p.add_argument("--system", default="gabor", choices=REZERO_SYSTEMS,
                    help="the model to re-zero: gabor (the default) or align (the "
                         "image-alignment servo)")

@@ -97,8 +97,8 @@ class LoopConfig:
     the mean step (each axis' frame-to-frame standard deviation over the root of the frames
     read) is above ``settle_sem_mm`` in x or y or ``settle_sem_deg`` in the turn: a noisy
     camera (a high gain in a dim cell) gets the frames it needs, a quiet one is not slowed
-    (None: that axis sets no bound; both None, the default: ``settle_frames`` frames,
-    always; README change 29 has what 0.025 mm and 0.1 deg measured);
+    (default 0.025 mm and 0.1 deg, README change 29; None: that axis sets no bound; both
+    None: ``settle_frames`` frames, always);
     settle_average: how those frames make one step: ``frames``, the step read from their
     mean frame (the camera's noise averaged out before the part's edge is read: in a dim
     frame's shadows some noisy pixels join the part's blob, which moves its centre one way
@@ -145,10 +145,10 @@ class LoopConfig:
     settle_mm: float = field(default=0.5, metadata={"min": 0.0})
     settle_deg: float = field(default=2.0, metadata={"min": 0.0})
     settle_max_frames: int = field(default=16, metadata={"min": 1, "max": 64})
-    settle_sem_mm: float | None = field(default=None, metadata={"min": 0.0,
-                                                                "exclusive_min": True})
-    settle_sem_deg: float | None = field(default=None, metadata={"min": 0.0,
+    settle_sem_mm: float | None = field(default=0.025, metadata={"min": 0.0,
                                                                  "exclusive_min": True})
+    settle_sem_deg: float | None = field(default=0.1, metadata={"min": 0.0,
+                                                                "exclusive_min": True})
     settle_average: Literal["frames", "steps"] = "frames"
     turn_check_deg: float | None = field(default=10.0, metadata={"min": 0.0})
     turn_check_share: float = field(default=0.4, metadata={"min": 0.0, "max": 1.0})
