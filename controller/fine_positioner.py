@@ -21,7 +21,7 @@ from calibration_free.dataset import Dataset
 from calibration_free.rezero import CLIPPED_WARN_SHARE, rezero
 from controller.loop.grasp import GraspResult, guarded_grasp
 from controller.loop.iteration_log import IterationLog
-from controller.loop.positioning import PositioningLoop, PositioningResult, step_scatter
+from controller.loop.positioning import LoopConfig, PositioningLoop, PositioningResult, step_scatter
 from controller.systems.base import TrainedModel
 from controller.systems.estimator import full_step
 from controller.systems.registry import SYSTEMS
@@ -40,7 +40,7 @@ REZERO_SYSTEMS = ("gabor", "align")
 # at a time, eight means; fewer leave more of the dark frame's noise in the zero (README
 # "Re-zero in the cell's light"). 0.8 s at 30 frames a second. Where the loop's settling look
 # reads more frames at a time in that light (``LoopConfig.settle_count``) it takes more, so
-# that two such means fit.
+# that two whole such means fit.
 REZERO_FRAMES = 24
 
 DATASETS = ("nn1", "nn2", "test")
@@ -287,6 +287,7 @@ class FinePositioner:
         if system == "gabor":
             report["frame_scatter"] = None if scatter is None else [round(v, 4)
                                                                      for v in scatter]
+            _warn_if_too_noisy(loop, scatter)
             report["heading_zero"] = None
             if done.clipped_share > CLIPPED_WARN_SHARE:
                 logger.warning("rezero: the camera clips %.0f%% of the part's pixels at the "
@@ -399,3 +400,21 @@ def _same_pose(a: Pose, b: Pose, tol: float = 0.005) -> bool:
     0.01 mm and 0.01 deg to which VAL reports a pose."""
     return all(abs(getattr(a, f) - getattr(b, f)) <= tol
                for f in ("x_mm", "y_mm", "z_mm", "o_deg", "a_deg", "t_deg"))
+
+
+def _warn_if_too_noisy(loop: LoopConfig, scatter: tuple[float, float, float] | None) -> None:
+    """Warn where single frames at the taught pose scatter so much that a settling look's
+    ``settle_max_frames`` still leave its mean step beyond the loop's bounds
+    (``LoopConfig.settle_known``): the loop will end with that noise in its step."""
+    if scatter is None:
+        return
+    root = math.sqrt(loop.settle_max_frames)
+    left = (scatter[0] / root, scatter[1] / root, scatter[2] / root)
+    if loop.settle_known(left):
+        return
+    logger.warning("rezero: single frames at the taught pose scatter by %.3f / %.3f mm and "
+                   "%.2f deg in this light; a settling look's %d frames still leave %.3f mm "
+                   "and %.2f deg in its mean step, above controller.loop.settle_sem_mm / "
+                   "settle_sem_deg: lower the camera's gain (README \"Expose for the part\")",
+                   *scatter, loop.settle_max_frames, max(left[0], left[1]), left[2])
+

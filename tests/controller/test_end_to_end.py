@@ -185,6 +185,24 @@ def test_cli_rezero_moves_the_zero_to_the_new_light_and_refuses_a_moved_part(tra
     assert model.read_bytes() == written
 
 
+@pytest.mark.parametrize("scatter, bounds, warned", [
+    ((0.2, 0.05, 0.2), {}, True),          # x: 0.2 / 4 = 0.05 mm left after 16 frames
+    ((0.05, 0.05, 0.6), {}, True),         # the turn: 0.15 deg left
+    ((0.1, 0.05, 0.4), {}, False),         # 16 frames bring both within 0.025 mm, 0.1 deg
+    ((0.2, 0.05, 0.6), {"settle_sem_mm": None, "settle_sem_deg": None}, False),  # no bounds
+])
+def test_rezero_warns_where_the_settling_look_cannot_average_the_noise_away(
+        scatter, bounds, warned, caplog):
+    from controller.fine_positioner import _warn_if_too_noisy
+    from controller.loop.positioning import LoopConfig
+
+    with caplog.at_level("WARNING", logger="controller.fine_positioner"):
+        _warn_if_too_noisy(LoopConfig(**bounds), scatter)
+    assert ("lower the camera's gain" in caplog.text) is warned
+    if warned:
+        assert len(caplog.records) == 1 and "16 frames" in caplog.text
+
+
 def test_cli_rezero_by_heading_turns_the_part_and_puts_it_back(trained, tmp_path, capsys,
                                                               caplog):
     """`finepos rezero --heading-step`: the arm grasps the cube, turns it, sets it down,
