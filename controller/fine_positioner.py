@@ -21,7 +21,13 @@ from calibration_free.dataset import Dataset
 from calibration_free.rezero import CLIPPED_WARN_SHARE, rezero
 from controller.loop.grasp import GraspResult, guarded_grasp
 from controller.loop.iteration_log import IterationLog
-from controller.loop.positioning import LoopConfig, PositioningLoop, PositioningResult, step_scatter
+from controller.loop.positioning import (
+    LoopConfig,
+    PositioningLoop,
+    PositioningResult,
+    mean_scatter,
+    step_scatter,
+)
 from controller.systems.base import TrainedModel
 from controller.systems.estimator import full_step
 from controller.systems.registry import SYSTEMS
@@ -408,8 +414,7 @@ def _warn_if_too_noisy(loop: LoopConfig, scatter: tuple[float, float, float] | N
     (``LoopConfig.settle_known``): the loop will end with that noise in its step."""
     if scatter is None:
         return
-    root = math.sqrt(loop.settle_max_frames)
-    left = (scatter[0] / root, scatter[1] / root, scatter[2] / root)
+    left = mean_scatter(scatter, loop.settle_max_frames)
     if loop.settle_known(left):
         return
     logger.warning("rezero: single frames at the taught pose scatter by %.3f / %.3f mm and "
@@ -417,4 +422,3 @@ def _warn_if_too_noisy(loop: LoopConfig, scatter: tuple[float, float, float] | N
                    "and %.2f deg in its mean step, above controller.loop.settle_sem_mm / "
                    "settle_sem_deg: lower the camera's gain (README \"Expose for the part\")",
                    *scatter, loop.settle_max_frames, max(left[0], left[1]), left[2])
-

@@ -177,8 +177,7 @@ class LoopConfig:
         if scatter is None:
             return self.settle_frames
         for n in range(self.settle_frames, self.settle_max_frames):
-            root = math.sqrt(n)
-            if self.settle_known((scatter[0] / root, scatter[1] / root, scatter[2] / root)):
+            if self.settle_known(mean_scatter(scatter, n)):
                 return n
         return self.settle_max_frames
 
@@ -248,10 +247,14 @@ def _standard_errors(steps: list[ToolStep]) -> tuple[float, float, float] | None
     """The standard error of the mean of ``steps`` in x, y (mm) and the turn (deg): each
     axis' sample standard deviation over the root of their number; None below two."""
     sd = step_scatter(steps)
-    if sd is None:
-        return None
-    root = math.sqrt(len(steps))
-    return sd[0] / root, sd[1] / root, sd[2] / root
+    return None if sd is None else mean_scatter(sd, len(steps))
+
+
+def mean_scatter(scatter: tuple[float, float, float], n: int) -> tuple[float, float, float]:
+    """The standard errors (x, y mm, the turn deg) of a mean of ``n`` frames' steps whose
+    single frames scatter by ``scatter`` (standard deviations)."""
+    root = math.sqrt(n)
+    return scatter[0] / root, scatter[1] / root, scatter[2] / root
 
 
 def _less(step: ToolStep, zero: ToolStep | None) -> ToolStep:
