@@ -10,6 +10,11 @@ to the first state within the safe tolerance, ``time_to_grasp_s`` to the part he
 lift; each as ``{"median", "p95", "never"}`` over the trials (``never``: trials that did not
 get there, counted as infinitely slow in the percentiles, which are None when they fall on
 such a trial), plus ``per_trial`` lists.
+
+``by_heading`` splits the trials by where the part lay: its turn on the table from its taught
+heading, within one symmetry period, in equal bins. A lamp at the side lights the part from
+another side at each heading, and what it does to the reading shows there as a bin whose mean
+error is not zero.
 """
 
 from __future__ import annotations
@@ -25,6 +30,8 @@ SAFE_MM = 2.0
 SAFE_DEG = 5.0
 RMS_BUDGETS = (0.5, 1.0, 1.5, 2.5, 3.5, 6.5)
 SAFE_BUDGETS = (1.0, 1.5, 2.5, 3.5)
+HEADING_BUDGET = 2.5
+HEADING_BINS = 12
 
 
 def state_at(states: Sequence[LoopState], budget: float) -> LoopState:
@@ -119,3 +126,37 @@ def summarise(trials: Sequence[Sequence[LoopState]],
     if grasp_times:
         out["time_to_grasp_s"] = _percentiles(grasp_times)
     return out
+
+
+def by_heading(trials: Sequence[Sequence[LoopState]], turns_deg: Sequence[float],
+               period_deg: float, budget: float = HEADING_BUDGET,
+               bins: int = HEADING_BINS) -> dict:
+    """The error at ``budget`` loops by the part's turn from its taught heading
+    (``turns_deg``, one per trial, taken within ``0..period_deg``): ``{"budget", "bins":
+    [{"from_deg", "to_deg", "trials", "mean", "rms"}, ...]}``, ``mean`` and ``rms`` as
+    ``{"x_mm", "y_mm", "phi_deg"}`` (None in a bin without trials).
+
+    Raises:
+        ValueError: not one turn per trial, or a period or bin count that is not positive.
+    """
+    if len(turns_deg) != len(trials):
+        raise ValueError(f"by_heading: needs one turn per trial, got {len(turns_deg)} for "
+                         f"{len(trials)}")
+    if not period_deg > 0 or bins < 1:
+        raise ValueError(f"by_heading: needs a positive period and bin count, got "
+                         f"{period_deg!r} and {bins!r}")
+    width = period_deg / bins
+    errs = np.array([state_at(t, budget).error for t in trials], dtype=float).reshape(-1, 3)
+    index = np.minimum((np.mod(np.asarray(turns_deg, dtype=float), period_deg) // width)
+                       .astype(int), bins - 1)
+    rows = []
+    for k in range(bins):
+        e = errs[index == k]
+        row = {"from_deg": k * width, "to_deg": (k + 1) * width, "trials": len(e),
+               "mean": None, "rms": None}
+        if len(e):
+            for name, values in (("mean", e.mean(axis=0)), ("rms", np.sqrt((e ** 2).mean(axis=0)))):
+                row[name] = {"x_mm": float(values[0]), "y_mm": float(values[1]),
+                             "phi_deg": float(values[2])}
+        rows.append(row)
+    return {"budget": budget, "bins": rows}

@@ -27,7 +27,7 @@ from tqdm import tqdm
 
 from controller.devices import open_devices
 from controller.evaluation.hil import open_hil_devices
-from controller.evaluation.metrics import summarise, wilson
+from controller.evaluation.metrics import by_heading, summarise, wilson
 from controller.fine_positioner import REZERO_SYSTEMS, FinePositioner
 from controller.systems.base import TrainedModel
 from controller.systems.registry import SYSTEMS
@@ -147,15 +147,18 @@ def run_trials(system: str, model: TrainedModel, config, trials: int, seed: int,
         fp = FinePositioner(timed, config, log=log, state_dir=work_dir, recorder=recorder)
         fp.use_model(model)
         fp.teach_auto()  # the state file records the part's grasp geometry for the grasp
-        x0, y0, _ = cell.object_pose()
+        x0, y0, taught_heading = cell.object_pose()
         kappa = cell.kappa
         period = 360.0 / kappa
+        turns = []  # each trial's part turned from its taught heading
         for _ in tqdm(range(trials), desc=f"evaluate {system}", unit="trial",
                       disable=None if progress else True, leave=False):
             devices.arm.open_gripper()
             x = x0 + rng.uniform(-PLACEMENT_MM, PLACEMENT_MM)
             y = y0 + rng.uniform(-PLACEMENT_MM, PLACEMENT_MM)
-            cell.place_object(x, y, rng.uniform(0.0, period))
+            heading = rng.uniform(0.0, period)
+            cell.place_object(x, y, heading)
+            turns.append((heading - taught_heading) % period)
             nominal = cell.nominal_grasp_pose()
             dx, dy = rng.uniform(-OFFSET_MM, OFFSET_MM, 2)
             dphi = rng.uniform(-period / 2, period / 2)
@@ -184,7 +187,7 @@ def run_trials(system: str, model: TrainedModel, config, trials: int, seed: int,
             if on_trial is not None:
                 on_trial()
     return {"states": states, "grasps": grasps, "seconds_per_iteration": per_iteration,
-            "outcomes": outcomes, "object": cell_kind(config), "kappa": kappa,
+            "outcomes": outcomes, "object": cell_kind(config), "kappa": kappa, "turns": turns,
             "state_times": state_times, "grasp_times": grasp_times,
             "timing": config.scene.timing, "time_split": splits}
 
@@ -305,5 +308,7 @@ def build_report(system: str, config, eval_cfg, *, trials: int, seed: int,
         "scene": config.source,
         "rezero": run.get("rezero"),
     }
+    if run.get("turns") is not None:
+        report["by_heading"] = by_heading(run["states"], run["turns"], 360.0 / run["kappa"])
     report["_trial_states"] = [[(s.loops, s.error) for s in t] for t in run["states"]]
     return report

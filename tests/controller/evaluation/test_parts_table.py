@@ -94,6 +94,10 @@ def test_evaluate_part_trains_and_tests_on_that_part(tmp_path, capsys):
     assert report["object"] == "ledge" and report["trials"] == 2
     assert sum(report["outcomes"].values()) == 2 and report["train_images"] == 2 * (27 + 4)
     assert set(report["rms"]) >= {"1.5", "2.5", "3.5"} and "1.5" in report["safe_rate_ci"]
+    # the ledge (kappa 2): its turns over half a turn, in twelve bins of 15 deg
+    bins = report["by_heading"]["bins"]
+    assert len(bins) == 12 and bins[-1]["to_deg"] == 180.0
+    assert sum(b["trials"] for b in bins) == 2
 
 
 @pytest.mark.slow
