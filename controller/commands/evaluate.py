@@ -31,8 +31,8 @@ rezero: what each translation net read there before, mm; --system align: the ser
 taken again, and what it read there before). With --rezero-heading-step DEG the model also
 gets its zero by heading in that light, as `finepos rezero --heading-step` reads it: the arm
 turns the part itself, in steps of at most DEG over one symmetry period centred on its taught
-heading (where the trials' tool ends), and reads NN2's turn there, and for the cube the
-translation too (the report's rezero.heading_zero).
+heading (where the trials' tool ends), and reads NN2's turn and the translation there (the
+report's rezero.heading_zero).
 
 Also: finepos evaluate --lighting poor --teach-lighting poor --trials 50
 

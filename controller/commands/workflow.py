@@ -252,11 +252,14 @@ def register(subparsers) -> None:
                     "with it, at headings at most DEG apart over --heading-range FROM TO (the "
                     "part's turn from its taught heading, deg; default one symmetry period "
                     "centred on it: -45 45 for the cube; the whole turn less one step for the "
-                    "screw), and puts it back; for the cube it also closes the jaws on it "
-                    "turned by a quarter turn after each set-down, which centres it, and reads "
-                    "the translation as well. The loop then takes the zero at the tool's "
-                    "heading off each full look's step. About 9 s a heading (20 s for the "
-                    "cube, centred too); the gripper must be able to grasp the part there. "
+                    "screw), and puts it back, and reads the translation as well: the cube it "
+                    "centres by closing the jaws on it turned by a quarter turn after each "
+                    "set-down; the other parts it turns back to the taught heading after each "
+                    "heading and looks there too, which says how far the set-downs moved them. "
+                    "The loop then takes the zero at the tool's heading off each full look's "
+                    "step. About 20 s a heading (the centring or the turn back doubles the 9 s "
+                    "of a grasp, a turn, a set-down and a look; --heading-range or a larger "
+                    "step for less); the gripper must be able to grasp the part there. "
                     "A plain rezero drops the zero by heading (it belongs to the old light).")
     add_config_option(p)
     add_device_options(p)

@@ -28,11 +28,24 @@ zero of the translation. The part then lies where the arm's repeatability puts i
 simulated cell within 0.01-0.03 mm of the jaws' middle), whatever the set-downs before; each
 centring scatters by that much, so a reference taken from the two centrings at the taught
 heading would put their common error into every heading's zero (change 30 in the README).
-For the other parts the translation is not read.
+
+The other parts (the nut, the ledge, the screw) the jaws centre across themselves only, and
+their set-downs do not slide them evenly (the screw: none at most, 0.06 mm along its shank
+at some): shared out evenly, the slides left up to 0.23 mm in the screw's table in good light.
+So after each heading the arm turns the part back to the taught heading and looks there too:
+that look says how far the set-downs have moved the part (and turned it), and each heading's
+reading is taken less the mean of the looks at the taught heading either side of it. What is
+left is half the difference of the set-down there and the one back, and the looks' own
+scatter. The translation is read against the plain zero, not against the first of those
+looks: a look's reading moves with the camera's gain from one look to the next, and the
+first look's would be in every heading's zero (the screw in poor light: 0.07 mm). The turn
+is read against the first look, as the cube's: the plain zero leaves NN2's reading at the
+taught heading as it is, and the table keeps it.
 
 Each heading costs a grasp, a turn, a set-down and a look: about 9 cell seconds with the
 realistic timing; centring the cube adds two turns, a guarded descent and a closing, about 10
-more (the cube in 5 deg steps: 6.2 min, 2.9 min without the centring).
+more (the cube in 5 deg steps: 6.2 min, 2.9 min without the centring); turning the other
+parts back doubles their cost (the screw in 15 deg steps: 24 headings, 48 set-downs).
 """
 
 from __future__ import annotations
@@ -58,7 +71,8 @@ MAX_HEADINGS = 360
 
 def centres(kappa: int) -> bool:
     """Whether the arm can centre the part by closing the jaws on it turned by a quarter
-    turn (two pairs of faces at right angles), and so read the translation by heading."""
+    turn (two pairs of faces at right angles); the others are read between looks at the
+    taught heading (module docstring)."""
     return kappa % 4 == 0
 
 
@@ -104,8 +118,8 @@ def _turn_sign(taught: Pose) -> float:
 def read_heading_zero(fp, estimator, turns: Sequence[float], frames: int,
                       average: int) -> HeadingZero:
     """The zero by heading at ``turns`` (the part's turns from its taught heading, deg, in
-    order: ``headings``; see the module docstring): the turn, and the translation where the
-    part can be centred (``centres``); ``fp``: the ``FinePositioner``, its arm at the taught
+    order: ``headings``; see the module docstring): the turn and the translation, the part
+    centred where it can be (``centres``); ``fp``: the ``FinePositioner``, its arm at the taught
     pose and the part where it was taught; ``estimator``: the re-zeroed model's, without a
     zero by heading.
 
@@ -147,6 +161,8 @@ def read_heading_zero(fp, estimator, turns: Sequence[float], frames: int,
         arm.open_gripper()
         current = turn
         set_downs += 1
+        logger.info("rezero: set-down %d, the part turned %g deg from its taught heading",
+                    set_downs, turn)
         fp.move_to(over(turn))
         return True
 
@@ -163,30 +179,66 @@ def read_heading_zero(fp, estimator, turns: Sequence[float], frames: int,
     if square:
         centre(0.0)
     before = _step_read(fp, estimator, frames, average, 0.0)  # centred where it was taught
+    if not square:
+        return _bracketed(fp, estimator, turns, frames, average, before, set_down_at)
     readings = []  # (heading, step read, set-downs before)
     for turn in turns:
-        if set_down_at(turn) and square:
+        if set_down_at(turn):
             centre(turn)
         readings.append((arm.pose().approach_rotation_deg,
                          _step_read(fp, estimator, frames, average, turn), set_downs))
-    if set_down_at(0.0) and square:
+    if set_down_at(0.0):
         centre(0.0)
     after = _step_read(fp, estimator, frames, average, 0.0)
     drift = (after.dphi_deg - before.dphi_deg) / max(set_downs, 1)  # a set-down's
     logger.info("rezero: %d set-downs turned the part by %.3f deg each", set_downs, drift)
-    if square:
-        logger.info("rezero: centred at the taught heading the translation read (%.3f, %.3f)"
-                    " mm before and (%.3f, %.3f) mm after", before.dx_mm, before.dy_mm,
-                    after.dx_mm, after.dy_mm)
+    logger.info("rezero: centred at the taught heading the translation read (%.3f, %.3f)"
+                " mm before and (%.3f, %.3f) mm after", before.dx_mm, before.dy_mm,
+                after.dx_mm, after.dy_mm)
     closed = []
     for heading, read, count in readings:
-        row = (heading, read.dphi_deg - count * drift)
-        if square:
-            row += (read.dx_mm, read.dy_mm)  # against the plain zero: the part as taught
+        # the turn less the set-downs' share of the drift; the translation against the plain
+        # zero: the part centred, as taught
+        row = (heading, read.dphi_deg - count * drift, read.dx_mm, read.dy_mm)
         closed.append(row)
-        logger.info("rezero: at heading %.1f deg the taught pose reads %s", heading,
-                    ", ".join(f"{v:.3f}" for v in row[1:]))
+        _log_row(row)
     return HeadingZero.from_readings(closed)
+
+
+def _bracketed(fp, estimator, turns: Sequence[float], frames: int, average: int,
+               before: ToolStep, set_down_at) -> HeadingZero:
+    """The zero by heading of a part the jaws cannot centre (module docstring): back to the
+    taught heading after each heading, where the reading says how far the set-downs have
+    moved the part; each heading's reading less the mean of the two taken there either side
+    of it, the first of them ``before``: the translation against the plain zero (the part as
+    taught reads nothing there), the turn against ``before`` (the plain zero leaves NN2's
+    reading at the taught heading as it is, and the table keeps it)."""
+    arm = fp.devices.arm
+    rows = []
+    back = before  # the reading at the taught heading before this heading's set-down
+    for turn in turns:
+        set_down_at(turn)
+        heading = arm.pose().approach_rotation_deg
+        read = _step_read(fp, estimator, frames, average, turn)
+        after = _step_read(fp, estimator, frames, average, 0.0) if set_down_at(0.0) else read
+        # where the set-downs have left the part: the turn against the first look (the plain
+        # zero leaves NN2's reading at the taught heading as it is), the translation against
+        # the plain zero
+        turned = 0.5 * (back.dphi_deg + after.dphi_deg) - before.dphi_deg
+        dx, dy = 0.5 * (back.dx_mm + after.dx_mm), 0.5 * (back.dy_mm + after.dy_mm)
+        rows.append((heading, read.dphi_deg - turned, read.dx_mm - dx, read.dy_mm - dy))
+        _log_row(rows[-1])
+        back = after
+    logger.info("rezero: at the taught heading the part read %.3f deg, (%.3f, %.3f) mm before "
+                "the first set-down and %.3f deg, (%.3f, %.3f) mm after the last",
+                before.dphi_deg, before.dx_mm, before.dy_mm, back.dphi_deg, back.dx_mm,
+                back.dy_mm)
+    return HeadingZero.from_readings(rows)
+
+
+def _log_row(row: tuple[float, ...]) -> None:
+    logger.info("rezero: at heading %.1f deg the taught pose reads %s", row[0],
+                ", ".join(f"{v:.3f}" for v in row[1:]))
 
 
 def _step_read(fp, estimator, frames: int, average: int, turn: float) -> ToolStep:

@@ -95,7 +95,7 @@ def test_readings_with_the_translation_are_sorted_with_their_headings():
 @pytest.mark.parametrize("dx, dy, match", [
     ((0.0, 0.1), None, "go together"),
     ((0.0,), (0.0,), "one translation per heading"),
-    ((0.0, 1.5), (0.0, 0.0), "beyond 1 mm"),
+    ((0.0, 1.6), (0.0, 0.0), "beyond 1.5 mm"),
     ((0.0, math.nan), (0.0, 0.0), "not finite"),
     ((0.0, "x"), (0.0, 0.0), "not numbers"),
 ])

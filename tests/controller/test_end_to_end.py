@@ -299,3 +299,41 @@ def test_position_then_grasp_makes_the_converged_step_with_the_first_descent(tra
             grasp = fp.grasp()
         assert grasp.carried_step is None and "not carried" in caplog.text
         assert result.reason.endswith("not made (the arm moved before the grasp)")
+
+
+@pytest.mark.slow
+def test_rezero_by_heading_reads_a_part_the_jaws_cannot_centre_between_looks_back(
+        tmp_path, caplog):
+    """The nut (kappa 6): after each heading the arm turns it back to the taught heading and
+    looks there too; its zero by heading keeps the translation as well as the turn, read
+    against those looks, and the nut lies back at its taught heading, the arm at the taught
+    pose."""
+    from controller.config import config_from_mapping, with_part
+
+    cfg = with_part(config_from_mapping({"controller": {"acquisition": {
+        "nn1": {"shape": [3, 3, 3]}, "nn2": {"shape": [3, 3, 3]}}}}), "nut")
+    with open_devices(cfg, seed=3) as devices:
+        fp = FinePositioner(devices, cfg, state_dir=tmp_path / "state")
+        fp.teach_auto()
+        fp.acquire("nn1", progress=False)
+        fp.acquire("nn2", progress=False)
+        fp.train()
+        cell = devices.cell
+        before = cell.object_pose()
+        with caplog.at_level("INFO", logger="controller.teach.heading_zero"):
+            _, report = fp.rezero(6, heading_step_deg=30.0)
+        after = cell.object_pose()
+        assert math.hypot(after[0] - before[0], after[1] - before[1]) < 0.4
+        assert abs(wrap_deg(after[2] - before[2], 60.0)) < 0.3
+        assert cell.arm_pose() == pytest.approx(fp.state().nominal_pose)
+    table = report["heading_zero"]
+    assert list(np.diff(table["headings_deg"])) == pytest.approx([30, 30], abs=0.5)
+    assert len(table["dx_mm"]) == len(table["dy_mm"]) == 3
+    assert max(map(abs, table["dx_mm"] + table["dy_mm"])) < 0.3  # good light: little
+    # there and back for each of the two headings off the taught one
+    set_downs = [r.getMessage() for r in caplog.records
+                 if r.getMessage().startswith("rezero: set-down")]
+    assert [m.split("turned ")[1] for m in set_downs] == [
+        "-30 deg from its taught heading", "0 deg from its taught heading",
+        "30 deg from its taught heading", "0 deg from its taught heading"]
+    assert "after the last" in caplog.text

@@ -8,7 +8,9 @@ import math
 import pytest
 
 from calibration_free.errors import TrainingError
+from controller.teach import heading_zero
 from controller.teach.heading_zero import MAX_HEADINGS, centres, default_range, headings
+from drivers.core.pose import ToolStep
 
 
 def test_a_range_in_even_steps_of_at_most_the_step_both_ends_included():
@@ -44,3 +46,72 @@ def test_ranges_that_are_no_turns_are_refused_in_one_line(step, span, match):
     with pytest.raises(TrainingError, match=match) as err:
         headings(step, span)
     assert "\n" not in str(err.value)
+
+
+class _SlidingPart:
+    """A part the jaws cannot centre: each set-down slides it along the jaws (``slides``, mm,
+    one per set-down, and a turn of a tenth of that in deg); at each heading the taught pose
+    reads where it lies plus the lamp's offset there (``lamp``)."""
+
+    def __init__(self, slides, lamp):
+        self.slides, self.lamp = list(slides), lamp
+        self.turn, self.offset = 0.0, 0.0
+        self.set_downs = []
+        outer = self
+
+        class Arm:
+            def pose(self):
+                return type("Pose", (), {"approach_rotation_deg": 100.0 + outer.turn})()
+
+        self.devices = type("Devices", (), {"arm": Arm()})()
+
+    def set_down_at(self, turn: float) -> bool:
+        if turn == self.turn:
+            return False
+        self.offset += self.slides.pop(0)
+        self.turn = turn
+        self.set_downs.append(turn)
+        return True
+
+    def read(self, fp, estimator, frames, average, turn) -> ToolStep:
+        assert turn == self.turn
+        dx, dy, dphi = self.lamp(turn)
+        return ToolStep(self.offset + dx, dy, 0.0, 0.1 * self.offset + dphi)
+
+
+def test_a_part_the_jaws_cannot_centre_is_read_between_two_looks_at_the_taught_heading(
+        monkeypatch):
+    def lamp(turn):  # the plain zero nulls the translation at the taught heading, not the turn
+        return 0.01 * turn, -0.002 * turn, 0.2 + 0.003 * turn
+
+    # set-downs that slide the part unevenly, as the screw's do (0 to 0.06 mm)
+    slides = [0.0, 0.06, 0.02, 0.02, 0.05, 0.0, 0.01, 0.03]
+    part = _SlidingPart(slides, lamp)
+    monkeypatch.setattr(heading_zero, "_step_read", part.read)
+    turns = [-90.0, -30.0, 0.0, 30.0, 90.0]
+    # the first look at the taught heading reads 0.02 mm more than the part lies off (the
+    # camera's gain): it is in the first heading's zero by half, in no other
+    first = part.read(None, None, 6, 3, 0.0)
+    before = ToolStep(first.dx_mm + 0.02, first.dy_mm, 0.0, first.dphi_deg)
+    table = heading_zero._bracketed(part, None, turns, 6, 3, before, part.set_down_at)
+    # there and back for every heading but the taught one itself
+    assert part.set_downs == [-90.0, 0.0, -30.0, 0.0, 30.0, 0.0, 90.0, 0.0]
+    assert part.turn == 0.0
+    # the table holds the tool's headings, unwrapped within half a turn of the first read
+    assert table.headings_deg == pytest.approx([-170.0, 10.0, 70.0, 100.0, 130.0])
+    off = 0.5 * max(abs(a - b) for a, b in zip(slides[::2], slides[1::2], strict=True))
+    for i, heading in enumerate(table.headings_deg):
+        dx, dy, dphi = lamp((heading - 100.0 + 180.0) % 360.0 - 180.0)
+        # off by half the difference of the slides there and back, at most (the first
+        # heading: and by half the first look's extra)
+        assert table.dx_mm[i] == pytest.approx(dx, abs=off + (0.01 if heading == 10.0 else 0)
+                                               + 1e-9)
+        assert table.dy_mm[i] == pytest.approx(dy, abs=1e-9)
+        assert table.dphi_deg[i] == pytest.approx(dphi, abs=0.1 * off + 1e-9)
+    assert table.dx_mm[3] == pytest.approx(0.0, abs=1e-9)  # the taught heading, no set-down
+    # what is left is the slides' unevenness (and the first look's), never their sum (0.19 mm)
+    worst = 0.0
+    for i, heading in enumerate(table.headings_deg):
+        worst = max(worst, abs(table.dx_mm[i] - lamp((heading - 100.0 + 180.0) % 360.0
+                                                      - 180.0)[0]))
+    assert 0.0 < worst <= off + 0.01 + 1e-9
