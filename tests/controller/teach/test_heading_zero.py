@@ -107,7 +107,9 @@ def test_a_part_the_jaws_cannot_centre_is_read_between_two_looks_at_the_taught_h
         assert table.dx_mm[i] == pytest.approx(dx, abs=off + (0.01 if heading == 10.0 else 0)
                                                + 1e-9)
         assert table.dy_mm[i] == pytest.approx(dy, abs=1e-9)
-        assert table.dphi_deg[i] == pytest.approx(dphi, abs=0.1 * off + 1e-9)
+        # the turn (a tenth of a degree a millimetre of slide here) closed out evenly over
+        # the eight set-downs: within 0.004 deg of the lamp's
+        assert table.dphi_deg[i] == pytest.approx(dphi, abs=0.004)
     assert table.dx_mm[3] == pytest.approx(0.0, abs=1e-9)  # the taught heading, no set-down
     # what is left is the slides' unevenness (and the first look's), never their sum (0.19 mm)
     worst = 0.0
