@@ -62,10 +62,10 @@ class ModelBundle(TaughtModel):
         axis: for an elongated part, the map from its long axis to the turn near the taught
             pose (``calibration_free.axis``), which takes over from NN2 there; None: NN2
             alone.
-        heading_zero: the zero by the tool's heading in the cell's light: NN2's turn and,
-            for the cube, the translation (``calibration_free.heading_zero``, made by a
-            re-zero with a heading step; the positioning loop takes it off each full look's
-            step); None: one zero for every heading.
+        heading_zero: the zero by the tool's heading in the cell's light: NN2's turn and
+            the translation (``calibration_free.heading_zero``, made by a re-zero with a
+            heading step; the positioning loop takes it off each full look's step); None:
+            one zero for every heading.
         training: JSON-able training metadata (loss curves, seconds, sample counts, seed).
         format_version: file format version this bundle follows.
     """

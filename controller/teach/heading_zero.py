@@ -129,116 +129,134 @@ def read_heading_zero(fp, estimator, turns: Sequence[float], frames: int,
             part may lie turned), or the part not seen at a heading.
         FineposError: the arm or another device failed.
     """
-    state = fp.state()
-    arm, grasp_cfg = fp.devices.arm, fp.config.controller.grasp
-    taught = state.nominal_pose
-    sign = _turn_sign(taught)
-    part = parts.part(state.object_kind)
-    weight_n = part.mass_g * 9.81e-3
-    square = centres(part.kappa)
-    current = 0.0  # the part's turn from its taught heading
-    set_downs = 0
+    cell = _Turner(fp, estimator, frames, average)
+    if centres(cell.kappa):
+        return _centred(cell, turns)
+    return _bracketed(cell, turns)
 
-    def over(turn: float) -> Pose:
-        return taught.moved_in_tool_frame(ToolStep(dphi_deg=sign * turn))
 
-    def grasp(what: str, lift: bool = True):
-        result = guarded_grasp(arm, fp.devices.wrench, state.grasp_depth_mm,
-                               state.object_width_mm, grasp_cfg, weight_n, lift=lift)
+class _Turner:
+    """The arm's side of a re-zero by heading: it turns the part on the table by grasping,
+    turning and setting it down (``set_down_at``, counted in ``set_downs``), centres a part
+    with faces at right angles between the jaws (``centre``) and reads the full look's step
+    over the part (``read``)."""
+
+    def __init__(self, fp, estimator, frames: int, average: int):
+        self.fp, self.estimator, self.frames, self.average = fp, estimator, frames, average
+        state = fp.state()
+        self.arm, self.grasp_cfg = fp.devices.arm, fp.config.controller.grasp
+        self.state, self.taught = state, state.nominal_pose
+        self.sign = _turn_sign(self.taught)
+        part = parts.part(state.object_kind)
+        self.kappa, self.weight_n = part.kappa, part.mass_g * 9.81e-3
+        self.current = 0.0  # the part's turn from its taught heading
+        self.set_downs = 0
+
+    def over(self, turn: float) -> Pose:
+        """The taught pose turned with the part turned by ``turn``."""
+        return self.taught.moved_in_tool_frame(ToolStep(dphi_deg=self.sign * turn))
+
+    def heading(self) -> float:
+        """The tool's heading (deg)."""
+        return self.arm.pose().approach_rotation_deg
+
+    def read(self, turn: float) -> ToolStep:
+        """The step the full look reads here, the part turned by ``turn``."""
+        return _step_read(self.fp, self.estimator, self.frames, self.average, turn)
+
+    def _grasp(self, what: str, lift: bool = True) -> None:
+        result = guarded_grasp(self.arm, self.fp.devices.wrench, self.state.grasp_depth_mm,
+                               self.state.object_width_mm, self.grasp_cfg, self.weight_n,
+                               lift=lift)
         if not result.success:
             raise TrainingError(f"rezero: the grasp {what} failed ({result.reason})")
 
-    def set_down_at(turn: float) -> bool:
-        nonlocal current, set_downs
-        if turn == current:
+    def set_down_at(self, turn: float) -> bool:
+        """Turn the part to ``turn`` from its taught heading and stand over it; False (no
+        motion) where it lies turned so already."""
+        if turn == self.current:
             return False
-        grasp(f"to turn the part to {turn:g} deg")
+        self._grasp(f"to turn the part to {turn:g} deg")
         # turned in moves within the safety layer's limit (``safety.max_step_deg``)
-        total = sign * (turn - current)
-        pieces = max(1, math.ceil(abs(total) / fp.config.safety.max_step_deg - 1e-9))
+        total = self.sign * (turn - self.current)
+        pieces = max(1, math.ceil(abs(total) / self.fp.config.safety.max_step_deg - 1e-9))
         for _ in range(pieces):
-            arm.move_tool(ToolStep(dphi_deg=total / pieces))
-        arm.move_tool(ToolStep(dz_mm=grasp_cfg.lift_mm))
-        arm.open_gripper()
-        current = turn
-        set_downs += 1
+            self.arm.move_tool(ToolStep(dphi_deg=total / pieces))
+        self.arm.move_tool(ToolStep(dz_mm=self.grasp_cfg.lift_mm))
+        self.arm.open_gripper()
+        self.current = turn
+        self.set_downs += 1
         logger.info("rezero: set-down %d, the part turned %g deg from its taught heading",
-                    set_downs, turn)
-        fp.move_to(over(turn))
+                    self.set_downs, turn)
+        self.fp.move_to(self.over(turn))
         return True
 
-    def centre(turn: float) -> None:
+    def centre(self, turn: float) -> None:
         """Close the jaws on the part's other pair of faces (the tool a quarter turn on) and
         back to over it at ``turn``."""
-        across = over(turn).moved_in_tool_frame(ToolStep(dphi_deg=90.0))
-        fp.move_to(across)
-        grasp(f"to centre the part at {turn:g} deg", lift=False)
-        arm.open_gripper()
-        fp.move_to(across)
-        fp.move_to(over(turn))
+        across = self.over(turn).moved_in_tool_frame(ToolStep(dphi_deg=90.0))
+        self.fp.move_to(across)
+        self._grasp(f"to centre the part at {turn:g} deg", lift=False)
+        self.arm.open_gripper()
+        self.fp.move_to(across)
+        self.fp.move_to(self.over(turn))
 
-    if square:
-        centre(0.0)
-    before = _step_read(fp, estimator, frames, average, 0.0)  # centred where it was taught
-    if not square:
-        return _bracketed(fp, estimator, turns, frames, average, before, set_down_at)
-    readings = []  # (heading, step read, set-downs before)
+
+def _centred(cell: _Turner, turns: Sequence[float]) -> HeadingZero:
+    """The zero by heading of a part the jaws centre (the cube, module docstring): each
+    heading's translation as read, against the plain zero (the part centred, as taught)."""
+    cell.centre(0.0)
+    before = cell.read(0.0)  # centred where it was taught
+    readings = []  # (heading, turn read, dx, dy, set-downs before the reading)
     for turn in turns:
-        if set_down_at(turn):
-            centre(turn)
-        readings.append((arm.pose().approach_rotation_deg,
-                         _step_read(fp, estimator, frames, average, turn), set_downs))
-    if set_down_at(0.0):
-        centre(0.0)
-    after = _step_read(fp, estimator, frames, average, 0.0)
-    drift = (after.dphi_deg - before.dphi_deg) / max(set_downs, 1)  # a set-down's
-    logger.info("rezero: %d set-downs turned the part by %.3f deg each", set_downs, drift)
+        if cell.set_down_at(turn):
+            cell.centre(turn)
+        read = cell.read(turn)
+        readings.append((cell.heading(), read.dphi_deg, read.dx_mm, read.dy_mm,
+                         cell.set_downs))
+    if cell.set_down_at(0.0):
+        cell.centre(0.0)
+    after = cell.read(0.0)
     logger.info("rezero: centred at the taught heading the translation read (%.3f, %.3f)"
                 " mm before and (%.3f, %.3f) mm after", before.dx_mm, before.dy_mm,
                 after.dx_mm, after.dy_mm)
-    closed = []
-    for heading, read, count in readings:
-        # the turn less the set-downs' share of the drift; the translation against the plain
-        # zero: the part centred, as taught
-        row = (heading, read.dphi_deg - count * drift, read.dx_mm, read.dy_mm)
-        closed.append(row)
-        _log_row(row)
-    return HeadingZero.from_readings(closed)
+    return _closed(readings, before, after, cell.set_downs)
 
 
-def _bracketed(fp, estimator, turns: Sequence[float], frames: int, average: int,
-               before: ToolStep, set_down_at) -> HeadingZero:
+def _bracketed(cell: _Turner, turns: Sequence[float]) -> HeadingZero:
     """The zero by heading of a part the jaws cannot centre (module docstring): back to the
     taught heading after each heading, where the reading says how far the set-downs have
     moved the part along the jaws; each heading's translation less the mean of the two
-    taken there either side of it, the first of them ``before`` (against the plain zero: the
-    part as taught reads nothing there). The turn, which the set-downs move little, has its
-    drift closed out evenly between ``before`` and the last look, as the cube's: the looks'
-    own scatter in NN2's reading is larger (the nut in poor light: 1.49 deg with each
-    heading's turn read between them, 1.20 closed out evenly)."""
-    arm = fp.devices.arm
+    taken there either side of it, the first of them before the first set-down (against the
+    plain zero: the part as taught reads nothing there). The turn, which the set-downs move
+    little, has its drift closed out evenly between the first and the last look, as the
+    cube's: the looks' own scatter in NN2's reading is larger (the nut in poor light: 1.49
+    deg with each heading's turn read between them, 1.20 closed out evenly)."""
+    before = cell.read(0.0)
     readings = []  # (heading, turn read, dx, dy, set-downs before the reading)
     back = before  # the reading at the taught heading before this heading's set-down
-    set_downs = 0
     for turn in turns:
-        set_downs += set_down_at(turn)
-        heading = arm.pose().approach_rotation_deg
-        read = _step_read(fp, estimator, frames, average, turn)
-        count = set_downs
-        if set_down_at(0.0):
-            set_downs += 1
-            after = _step_read(fp, estimator, frames, average, 0.0)
-        else:
-            after = read
+        cell.set_down_at(turn)
+        heading, read, count = cell.heading(), cell.read(turn), cell.set_downs
+        after = cell.read(0.0) if cell.set_down_at(0.0) else read
         # where the set-downs have left the part, against the plain zero
         dx, dy = 0.5 * (back.dx_mm + after.dx_mm), 0.5 * (back.dy_mm + after.dy_mm)
         readings.append((heading, read.dphi_deg, read.dx_mm - dx, read.dy_mm - dy, count))
         back = after
-    drift = (back.dphi_deg - before.dphi_deg) / max(set_downs, 1)  # a set-down's
     logger.info("rezero: at the taught heading the part read %.3f deg, (%.3f, %.3f) mm before "
-                "the first set-down and %.3f deg, (%.3f, %.3f) mm after the last; %d "
-                "set-downs turned it by %.3f deg each", before.dphi_deg, before.dx_mm,
-                before.dy_mm, back.dphi_deg, back.dx_mm, back.dy_mm, set_downs, drift)
+                "the first set-down and %.3f deg, (%.3f, %.3f) mm after the last",
+                before.dphi_deg, before.dx_mm, before.dy_mm, back.dphi_deg, back.dx_mm,
+                back.dy_mm)
+    return _closed(readings, before, back, cell.set_downs)
+
+
+def _closed(readings, before: ToolStep, after: ToolStep, set_downs: int) -> HeadingZero:
+    """The table from ``readings`` ((heading, turn read, dx, dy, set-downs before the
+    reading)), each turn less its set-downs' share of the turn's drift between the looks at
+    the taught heading ``before`` the first set-down and ``after`` the last, shared out
+    evenly over the ``set_downs``, as a surveyor closes a traverse."""
+    drift = (after.dphi_deg - before.dphi_deg) / max(set_downs, 1)  # a set-down's
+    logger.info("rezero: %d set-downs turned the part by %.3f deg each", set_downs, drift)
     rows = [(heading, dphi - count * drift, dx, dy)
             for heading, dphi, dx, dy, count in readings]
     for row in rows:

@@ -49,54 +49,50 @@ def test_ranges_that_are_no_turns_are_refused_in_one_line(step, span, match):
 
 
 class _SlidingPart:
-    """A part the jaws cannot centre: each set-down slides it along the jaws (``slides``, mm,
-    one per set-down, and a turn of a tenth of that in deg); at each heading the taught pose
-    reads where it lies plus the lamp's offset there (``lamp``)."""
+    """The arm's side of a re-zero (``heading_zero._Turner``) over a part the jaws cannot
+    centre: each set-down slides it along the jaws (``slides``, mm, one per set-down, and a
+    turn of a tenth of that in deg); at each heading the taught pose reads where it lies plus
+    the lamp's offset there (``lamp``); the first look reads ``first_extra`` mm more in x
+    (the camera's gain)."""
 
-    def __init__(self, slides, lamp):
-        self.slides, self.lamp = list(slides), lamp
+    def __init__(self, slides, lamp, first_extra=0.0):
+        self.slides, self.lamp, self.extra = list(slides), lamp, first_extra
         self.turn, self.offset = 0.0, 0.0
-        self.set_downs = []
-        outer = self
+        self.turns, self.set_downs = [], 0
 
-        class Arm:
-            def pose(self):
-                return type("Pose", (), {"approach_rotation_deg": 100.0 + outer.turn})()
-
-        self.devices = type("Devices", (), {"arm": Arm()})()
+    def heading(self) -> float:
+        return 100.0 + self.turn
 
     def set_down_at(self, turn: float) -> bool:
         if turn == self.turn:
             return False
         self.offset += self.slides.pop(0)
         self.turn = turn
-        self.set_downs.append(turn)
+        self.turns.append(turn)
+        self.set_downs += 1
         return True
 
-    def read(self, fp, estimator, frames, average, turn) -> ToolStep:
+    def read(self, turn) -> ToolStep:
         assert turn == self.turn
         dx, dy, dphi = self.lamp(turn)
-        return ToolStep(self.offset + dx, dy, 0.0, 0.1 * self.offset + dphi)
+        extra, self.extra = self.extra, 0.0
+        return ToolStep(self.offset + dx + extra, dy, 0.0, 0.1 * self.offset + dphi)
 
 
-def test_a_part_the_jaws_cannot_centre_is_read_between_two_looks_at_the_taught_heading(
-        monkeypatch):
+def test_a_part_the_jaws_cannot_centre_is_read_between_two_looks_at_the_taught_heading():
     def lamp(turn):  # the plain zero nulls the translation at the taught heading, not the turn
         return 0.01 * turn, -0.002 * turn, 0.2 + 0.003 * turn
 
     # set-downs that slide the part unevenly, as the screw's do (0 to 0.06 mm)
     slides = [0.0, 0.06, 0.02, 0.02, 0.05, 0.0, 0.01, 0.03]
-    part = _SlidingPart(slides, lamp)
-    monkeypatch.setattr(heading_zero, "_step_read", part.read)
-    turns = [-90.0, -30.0, 0.0, 30.0, 90.0]
     # the first look at the taught heading reads 0.02 mm more than the part lies off (the
     # camera's gain): it is in the first heading's zero by half, in no other
-    first = part.read(None, None, 6, 3, 0.0)
-    before = ToolStep(first.dx_mm + 0.02, first.dy_mm, 0.0, first.dphi_deg)
-    table = heading_zero._bracketed(part, None, turns, 6, 3, before, part.set_down_at)
+    part = _SlidingPart(slides, lamp, first_extra=0.02)
+    turns = [-90.0, -30.0, 0.0, 30.0, 90.0]
+    table = heading_zero._bracketed(part, turns)
     # there and back for every heading but the taught one itself
-    assert part.set_downs == [-90.0, 0.0, -30.0, 0.0, 30.0, 0.0, 90.0, 0.0]
-    assert part.turn == 0.0
+    assert part.turns == [-90.0, 0.0, -30.0, 0.0, 30.0, 0.0, 90.0, 0.0]
+    assert part.turn == 0.0 and part.set_downs == 8
     # the table holds the tool's headings, unwrapped within half a turn of the first read
     assert table.headings_deg == pytest.approx([-170.0, 10.0, 70.0, 100.0, 130.0])
     off = 0.5 * max(abs(a - b) for a, b in zip(slides[::2], slides[1::2], strict=True))
