@@ -224,21 +224,20 @@ class FinePositioner:
                ) -> tuple[TrainedModel, dict]:
         """Re-zero the part's model of ``system`` in the cell's light: move to the taught
         pose, take ``frames`` frames (more where the means below need them: at least two, all
-        whole), move the
-        model's zero there (Gabor: shift the
-        translation nets, ``calibration_free.rezero``, read on the frames' means as the
-        loop's settling look reads where ``settle_average`` is ``frames``: as many at a time
-        as it reads where single frames scatter as these do, ``LoopConfig.settle_count``;
-        the image-alignment servo: take its
-        template again, ``calibration_free.baselines.align.rezero``), store the model
-        (atomically) and use it. The part must lie where it was taught.
+        whole), move the model's zero there (Gabor: shift the translation nets,
+        ``calibration_free.rezero``, read on the frames' means as the loop's settling look
+        reads where ``settle_average`` is ``frames``: as many at a time as it reads where
+        single frames scatter as these do, ``LoopConfig.settle_count``; the image-alignment
+        servo: take its template again, ``calibration_free.baselines.align.rezero``), store
+        the model (atomically) and use it. The part must lie where it was taught.
 
         With ``heading_step_deg`` (Gabor only) the full look's step is then also read with
         the part turned to each heading of ``heading_range_deg`` (the part's turn from its
         taught heading; default ``heading_zero.default_range``: one symmetry period centred
         on it) in steps of at most that (``controller.teach.heading_zero``: the arm turns the
-        part itself, and centres the cube between its jaws), and the model keeps it as its
-        zero by heading: NN2's turn, and for the cube the translation. The loop takes it off
+        part itself, and centres the cube between its jaws; the other parts it reads between
+        looks back at the taught heading), and the model keeps it as its zero by heading:
+        NN2's turn and the translation. The loop takes it off
         each full look's step. A re-zero without it drops the model's zero by heading.
 
         Returns:
