@@ -376,7 +376,7 @@ class FinePositioner:
         clock = getattr(self.devices, "clock", None)  # cell seconds, for the recording
         sensor = self.devices.wrench if recorder is None else \
             recorder.recording_sensor(self.devices.wrench, clock)
-        weight_n = parts.part(state.object_kind).mass_g * 9.81e-3  # the taught part's
+        weight_n = parts.part(state.object_kind).weight_n  # the taught part's
         result = guarded_grasp(self.devices.arm, sensor, state.grasp_depth_mm,
                                state.object_width_mm, self.config.controller.grasp, weight_n,
                                carried, on_carried)

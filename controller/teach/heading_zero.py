@@ -148,7 +148,7 @@ class _Turner:
         self.state, self.taught = state, state.nominal_pose
         self.sign = _turn_sign(self.taught)
         part = parts.part(state.object_kind)
-        self.kappa, self.weight_n = part.kappa, part.mass_g * 9.81e-3
+        self.kappa, self.weight_n = part.kappa, part.weight_n
         self.current = 0.0  # the part's turn from its taught heading
         self.set_downs = 0
 

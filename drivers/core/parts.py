@@ -55,6 +55,11 @@ class Part:
     color: tuple[float, float, float]
 
     @property
+    def weight_n(self) -> float:
+        """The part's weight (N): what the wrist sensor feels while it is held."""
+        return self.mass_g * 9.81e-3
+
+    @property
     def grasp_depth_mm(self) -> float:
         """How far the grasp descends along the approach axis from the pre-grasp pose."""
         return APPROACH_HEIGHT_MM + self.grip_below_top_mm
