@@ -260,13 +260,9 @@ def _closed(readings, before: ToolStep, after: ToolStep, set_downs: int) -> Head
     rows = [(heading, dphi - count * drift, dx, dy)
             for heading, dphi, dx, dy, count in readings]
     for row in rows:
-        _log_row(row)
+        logger.info("rezero: at heading %.1f deg the taught pose reads %s", row[0],
+                    ", ".join(f"{v:.3f}" for v in row[1:]))
     return HeadingZero.from_readings(rows)
-
-
-def _log_row(row: tuple[float, ...]) -> None:
-    logger.info("rezero: at heading %.1f deg the taught pose reads %s", row[0],
-                ", ".join(f"{v:.3f}" for v in row[1:]))
 
 
 def _step_read(fp, estimator, frames: int, average: int, turn: float) -> ToolStep:
