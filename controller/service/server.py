@@ -8,10 +8,14 @@ stream sends its last event), joins their threads and removes the socket file. A
 served in threads. An authorised UNIX peer over either limit is kept by the accept thread itself
 (no thread, up to ``max_waiting`` of them, each for ``request_timeout_s``) for one request:
 ``abort`` or ``status`` is answered (abort in a short-lived thread), anything else
-``too_many_clients``; then it is closed. So no number of idle connections can lock out an
-abort. A peer the policy refuses gets ``unauthorized``. TCP connections that have not
+``too_many_clients``; then it is closed. When all ``max_waiting`` places are taken, the uid
+holding the most of them gives up its oldest (after what that peer sent already is read, so
+an abort it sent is still obeyed): a new peer always gets a place, and one uid's flood cannot
+push out another uid's peers. So no number of idle or reconnecting connections can lock out
+an abort. A peer the policy refuses gets ``unauthorized``. TCP connections that have not
 authenticated yet do not count: they have their own MAX_UNAUTHENTICATED slots (and
-AUTH_TIMEOUT_S each).
+AUTH_TIMEOUT_S each); when those are full the oldest is closed to make room, so peers without
+the token cannot keep out one that has it.
 """
 
 from __future__ import annotations
@@ -63,10 +67,13 @@ class ControlServer:
         self._listeners: dict[socket.socket, str] = {}
         self._inode: int | None = None
         self._connections: dict[socket.socket, threading.Thread] = {}
-        self._pending: set[socket.socket] = set()  # TCP connections not yet authenticated
+        # TCP connections not yet authenticated, oldest first (a dict keeps insertion order)
+        self._pending: dict[socket.socket, None] = {}
+        self._evicted: set[socket.socket] = set()  # closed unauthenticated, thread still ending
         self._uids: dict[socket.socket, int] = {}  # the peer uid of each served UNIX connection
-        # Authorised peers over the limits: (name, buffer, deadline), served by the accept thread.
-        self._waiting: dict[socket.socket, tuple[str, bytearray, float]] = {}
+        # Authorised peers over the limits, oldest first: (name, buffer, deadline, uid), served
+        # by the accept thread.
+        self._waiting: dict[socket.socket, tuple[str, bytearray, float, int]] = {}
         self._selector: selectors.BaseSelector | None = None
         self._lock = threading.Lock()
         self._closing = threading.Event()
@@ -78,13 +85,17 @@ class ControlServer:
     def client_count(self) -> int:
         """The number of authenticated connections being served now."""
         with self._lock:
-            return len(self._connections) - len(self._pending)
+            return len(self._connections) - len(self._pending) - len(self._evicted)
 
     def _admit_authenticated(self, connection: Connection) -> tuple[str, str] | None:
         """A TCP connection just authenticated: it takes a client slot if one is free."""
         with self._lock:
-            self._pending.discard(connection.sock)
-            if len(self._connections) - len(self._pending) > self.config.max_clients:
+            self._pending.pop(connection.sock, None)
+            if connection.sock in self._evicted:
+                return ("too_many_clients", f"closed: more than {MAX_UNAUTHENTICATED} "
+                                            "connections were authenticating at once")
+            served = len(self._connections) - len(self._pending) - len(self._evicted)
+            if served > self.config.max_clients:
                 return ("too_many_clients", f"{self.config.max_clients} clients connected "
                                             "already")
         return None
@@ -181,15 +192,32 @@ class ControlServer:
                 self._drop_waiting(sock)
 
     # -- peers over the limits: one abort or status each, answered here -----------------------
-    def _wait(self, sock: socket.socket, name: str) -> bool:
-        """Keep an authorised peer over the limits for one ``abort`` or ``status``."""
-        if len(self._waiting) >= self.config.max_waiting or self._selector is None:
+    def _wait(self, sock: socket.socket, name: str, uid: int) -> bool:
+        """Keep an authorised peer over the limits for one ``abort`` or ``status``, making
+        room first when every place is taken (``_evict_waiting``)."""
+        if self._selector is None:
             return False
+        while len(self._waiting) >= self.config.max_waiting:
+            self._evict_waiting()
         sock.setblocking(False)
         self._waiting[sock] = (name, bytearray(),
-                               time.monotonic() + self.config.request_timeout_s)
+                               time.monotonic() + self.config.request_timeout_s, uid)
         self._selector.register(sock, selectors.EVENT_READ)
         return True
+
+    def _evict_waiting(self) -> None:
+        """Free one waiting place: the oldest peer of the uid holding the most places. What it
+        sent already is read first, so a complete ``abort`` or ``status`` is still answered."""
+        counts: dict[int, int] = {}
+        for entry in self._waiting.values():
+            counts[entry[3]] = counts.get(entry[3], 0) + 1
+        heaviest = max(counts, key=counts.__getitem__)
+        victim = next(s for s, entry in self._waiting.items() if entry[3] == heaviest)
+        self._read_waiting(victim)
+        if victim in self._waiting:
+            logger.info("%s: disconnected: its waiting place went to a newer peer",
+                        self._waiting[victim][0])
+            self._drop_waiting(victim)
 
     def _drop_waiting(self, sock: socket.socket) -> None:
         self._waiting.pop(sock, None)
@@ -199,7 +227,7 @@ class ControlServer:
         sock.close()
 
     def _read_waiting(self, sock: socket.socket) -> None:
-        name, buffer, _ = self._waiting[sock]
+        name, buffer = self._waiting[sock][:2]
         try:
             chunk = sock.recv(4096)
         except BlockingIOError:
@@ -263,7 +291,7 @@ class ControlServer:
         kind = self._listeners[listener]
         name, refusal, uid = self._admit(sock, kind)
         if refusal is not None and refusal[0] == "too_many_clients" and uid is not None and \
-                self._wait(sock, name):
+                self._wait(sock, name, uid):
             return
         if refusal is not None:
             logger.warning("%s: refused: %s", name, refusal[1])
@@ -285,7 +313,7 @@ class ControlServer:
             if uid is not None:
                 self._uids[sock] = uid
             if tcp:
-                self._pending.add(sock)
+                self._pending[sock] = None
         thread.start()
 
     def _admit(self, sock: socket.socket,
@@ -295,11 +323,7 @@ class ControlServer:
         if kind == "tcp":
             host, port = sock.getpeername()[:2]
             name = f"tcp {host}:{port}"
-            with self._lock:
-                waiting = len(self._pending)
-            if waiting >= MAX_UNAUTHENTICATED:
-                return name, ("too_many_clients", f"{waiting} connections are authenticating "
-                                                  "already"), None
+            self._evict_unauthenticated()
             return name, None, None
         try:
             peer = peer_credentials(sock)
@@ -319,6 +343,19 @@ class ControlServer:
                                               "already (service.max_clients_per_uid)"), peer.uid
         return name, None, peer.uid
 
+    def _evict_unauthenticated(self) -> None:
+        """Make room for a new TCP connection: while MAX_UNAUTHENTICATED are still to
+        authenticate, close the oldest of them (its thread ends at its next read)."""
+        with self._lock:
+            while len(self._pending) >= MAX_UNAUTHENTICATED:
+                oldest = next(iter(self._pending))
+                del self._pending[oldest]
+                self._evicted.add(oldest)
+                logger.warning("an unauthenticated TCP connection closed to make room for a "
+                               "new one")
+                with contextlib.suppress(OSError):
+                    oldest.shutdown(socket.SHUT_RDWR)
+
     def _serve(self, connection: Connection) -> None:
         logger.debug("%s: connected", connection.name)
         try:
@@ -326,7 +363,8 @@ class ControlServer:
         finally:
             with self._lock:
                 self._connections.pop(connection.sock, None)
-                self._pending.discard(connection.sock)
+                self._pending.pop(connection.sock, None)
+                self._evicted.discard(connection.sock)
                 self._uids.pop(connection.sock, None)
             connection.sock.close()
             logger.debug("%s: disconnected", connection.name)

@@ -11,6 +11,7 @@ import time
 import pytest
 
 from controller.service.client import ServiceClient, ServiceError
+from controller.service.listeners import read_token
 from drivers.core.errors import ConfigError
 from tests.controller.service.conftest import (
     EVENT_TIMEOUT_S,
@@ -141,3 +142,42 @@ def test_abort_gets_through_200_idle_or_slow_peers(tmp_path, short_dir, fakes, k
                 thread.join()
             for peer in peers:
                 peer.close()
+
+
+def test_abort_is_obeyed_with_every_waiting_place_taken(tmp_path, short_dir, fakes):
+    config = service_config(tmp_path, short_dir, service={
+        "max_clients_per_uid": 2, "max_waiting": 4, "request_timeout_s": 30.0})
+    with running_service(config, device_opener(*fakes)) as service:
+        # the accept thread takes peers in the order they connected: all of these are in
+        # (2 served, 4 waiting, 3 more pushing out the oldest) before the operator is
+        peers = [raw_peer(service) for _ in range(9)]
+        try:
+            for _ in range(3):
+                with client_for(service) as operator:
+                    assert operator.call("abort")["halted"] is True
+                peers.append(raw_peer(service))  # the flood goes on between the aborts
+        finally:
+            for peer in peers:
+                peer.close()
+
+
+def test_unauthenticated_tcp_peers_cannot_lock_out_the_token_holder(tmp_path, short_dir, fakes):
+    token_file = tmp_path / "token"
+    token_file.write_text("s3cret-token-0123456789\n")
+    token_file.chmod(0o600)
+    with socket.socket() as probe:
+        probe.bind(("127.0.0.1", 0))
+        port = probe.getsockname()[1]
+    config = service_config(tmp_path, short_dir, service={
+        "tcp": {"port": port, "token_file": str(token_file)}})
+    with running_service(config, device_opener(*fakes)):
+        silent = [socket.create_connection(("127.0.0.1", port)) for _ in range(2 * 4)]
+        try:
+            for _ in range(10):
+                silent.append(socket.create_connection(("127.0.0.1", port)))
+                with ServiceClient(tcp=("127.0.0.1", port), token=read_token(token_file),
+                                   timeout_s=EVENT_TIMEOUT_S) as operator:
+                    assert operator.call("abort")["halted"] is True
+        finally:
+            for sock in silent:
+                sock.close()
