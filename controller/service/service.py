@@ -8,6 +8,8 @@ Threads and what they do:
   systemd watchdog: only while it runs and no arm command has hung beyond
   ``service.stall_timeout_s``. On stop it aborts the job, then closes the server, the devices and
   the iteration log, in that order;
+- the idle poll and each reconnection attempt run in a short-lived thread of their own, which
+  the control loop waits for unless a stop comes first: a stop never waits on a silent link;
 - the worker: one thread per job, one job at a time, holding the device lock;
 - the server's accept and connection threads, which call ``handle``.
 
@@ -252,7 +254,8 @@ class Service:
                 self._reconnect_if_due(now_s)
                 if cfg.idle_poll_s > 0 and now_s >= next_poll_s:
                     next_poll_s = now_s + cfg.idle_poll_s
-                    self._poll_arm()
+                    if self._machine.state is State.IDLE:
+                        self._unless_stopped(self._poll_arm, "idle-poll")
             except Exception as exc:  # the service never exits on a device or file error
                 logger.exception("control loop")
                 with self._machine.lock:
@@ -262,6 +265,33 @@ class Service:
             watchdog.tick(now_s, busy_s, cfg.stall_timeout_s)
             self._wake.wait(min(s for s in (TICK_S, watchdog.interval_s, cfg.idle_poll_s) if s))
             self._wake.clear()
+
+    def _unless_stopped(self, work: Callable[[], None], name: str) -> None:
+        """Run ``work`` (device exchanges: the idle poll, a reconnection) in its own thread and
+        wait until it ends or a stop is requested, so a stop never waits on a device: an
+        exchange still running then is abandoned, and ends when the shutdown closes the devices
+        under it (or at its own timeout). Re-raises what ``work`` raised."""
+        done = threading.Event()
+        errors: list[Exception] = []
+
+        def run() -> None:
+            try:
+                work()
+            except Exception as exc:  # noqa: BLE001 - re-raised in the control loop below
+                errors.append(exc)
+            finally:
+                done.set()
+                self._wake.set()
+
+        threading.Thread(target=run, name=name, daemon=True).start()
+        while not done.is_set() and not self._stop.is_set():
+            self._wake.wait()
+            self._wake.clear()
+        if not done.is_set():
+            logger.warning("stop requested during the %s: its device exchange is abandoned",
+                           name)
+        elif errors:
+            raise errors[0]
 
     def _poll_arm(self) -> None:
         """While idle, read the pose: a lost link shows up without waiting for a command."""
@@ -288,6 +318,10 @@ class Service:
                 return  # the devices are fine: the cell needs a new teach-in (after a reset)
             if self._reconnected:
                 return
+        self._unless_stopped(self._reconnect, "reconnect")
+
+    def _reconnect(self) -> None:
+        """One reconnection attempt (in fault, when due): on failure the next is scheduled."""
         with self._device_lock:
             try:
                 self._cell.recover()
