@@ -59,11 +59,15 @@ from controller.teach.state_folder import StateFolder
 from drivers.core.errors import ConfigError, FineposError
 from drivers.core.files import has_room, remove_stale_temp_files
 from drivers.core.typed_config import to_mapping
+from drivers.interfaces import Lifecycle
 
 logger = logging.getLogger(__name__)
 
 ITERATION_LOG_NAME = "iterations.jsonl"
 TICK_S = 0.5  # longest sleep of the control loop (it wakes at once for stop, reload, job end)
+# What an abort answer tells the operator when the arm did not acknowledge the halt.
+PENDANT_STOP = ("the arm's controller did not acknowledge a halt: if the arm may be moving, "
+                "press the stop button on the teach pendant")
 _REFUSAL_CODES = {State.STARTING: "not_ready", State.FAULT: "fault", State.STOPPING: "stopping"}
 
 
@@ -647,11 +651,23 @@ class Service:
                                              f"job {job.id} ({job.kind}) {outcome}{detail}")
         self._wake.set()
 
+    def _halt_unreachable(self) -> str | None:
+        """Why no halt can reach the arm now (its link is not open), else None."""
+        arm = self._cell.arm
+        if arm is None or not self._cell.is_open:
+            return "the devices are not open: no halt can reach the arm"
+        if arm.state is Lifecycle.DISCONNECTED:
+            return "the arm is disconnected: no halt can reach it"
+        return None
+
     def _abort_job(self, job: Job, wait_s: float) -> str | None:
         """Preempt ``job`` and halt the arm; returns why halting failed, if it did."""
         job.abort.set()
         if self._cell.arm is not None:
             self._cell.arm.preempt()
+        unreachable = self._halt_unreachable()
+        if unreachable is not None:
+            return unreachable
         fp = self._fp
         if fp is not None and fp.devices is not None:
             return self._halt(fp.abort, wait_s)
@@ -693,7 +709,11 @@ class Service:
 
     def abort(self) -> dict[str, Any]:
         """Preempt the running job (if any) and halt the arm. Training moves nothing and
-        cannot be interrupted: it runs to its end (the answer says so)."""
+        cannot be interrupted: it runs to its end (the answer says so).
+
+        ``halted`` is true only when the arm's controller acknowledged the halt. Otherwise
+        ``halt_error`` says why not (the arm disconnected, the devices not open, no reply in
+        time, the halt refused) and ``action`` tells the operator to use the teach pendant."""
         with self._machine.lock:
             job = self._job
         preempt = job is not None and job.kind != "train"
@@ -701,12 +721,15 @@ class Service:
         if preempt:
             logger.warning("abort requested: job %d (%s)", job.id, job.kind)
             halt_error = self._abort_job(job, wait_s)
-        elif self._cell.arm is not None:
-            halt_error = self._halt(self._cell.arm.halt, wait_s)
         else:
-            halt_error = "no devices open"
+            halt_error = self._halt_unreachable()
+            if halt_error is None:
+                halt_error = self._halt(self._cell.arm.halt, wait_s)
         answer = {"aborted": job.report() if preempt else None,
                   "halted": halt_error is None, "halt_error": halt_error}
+        if halt_error is not None:
+            logger.error("abort: the arm did not acknowledge a halt: %s", halt_error)
+            answer["action"] = PENDANT_STOP
         if job is not None and not preempt:
             answer["note"] = (f"job {job.id} (train) moves nothing and cannot be interrupted; "
                               "it ends by itself")

@@ -113,6 +113,23 @@ def test_lost_link_while_idle_is_noticed_and_reconnected_with_backoff(
     notifier.close()
 
 
+def test_abort_with_the_arm_disconnected_says_no_halt_reached_it(tmp_path, short_dir, backing,
+                                                                  notify_socket):
+    config = service_config(tmp_path, short_dir, service={"idle_poll_s": 0.05})
+    notifier = Notifier({"NOTIFY_SOCKET": str(notify_socket.path)})
+    with ValEmulator(backing, tcp_port=0) as emulator, \
+            running_service(config, device_opener(val_arm(emulator.url), FakeCamera(),
+                                                  FakeWrenchSensor()), notifier) as service, \
+            client_for(service) as client:
+        emulator.set_faults(ValFaults(drop_link_after_lines=0))  # TCP: every connection closed
+        notify_socket.wait_for(lambda m: "reconnect attempt" in m)  # its connect failed
+        assert client.call("status")["fault"]["devices"]["arm"] == "disconnected"
+        answer = client.call("abort")
+        assert answer["halted"] is False and "disconnected" in answer["halt_error"]
+        assert "teach pendant" in answer["action"]
+    notifier.close()
+
+
 @pytest.fixture
 def emulated_hardware(backing):
     """The VAL, ATI and MJPEG emulators over fakes, and the config sections that select the
