@@ -11,6 +11,7 @@ import dataclasses
 import math
 import os
 import stat
+import sys
 import types
 import typing
 from pathlib import Path
@@ -24,6 +25,7 @@ T = TypeVar("T")
 
 
 MAX_CONFIG_BYTES = 1 << 20  # a config file is a few KB; more is a wrong file
+MAX_CONFIG_INT = (1 << 63) - 1  # a whole number beyond int64 is no count, port or size
 
 
 def load_yaml_file(path: str | Path) -> dict[str, Any]:
@@ -32,7 +34,7 @@ def load_yaml_file(path: str | Path) -> dict[str, Any]:
     Raises:
         ConfigError: one line naming the file and what is wrong: unreadable, not a regular
             file (a FIFO or device would block or never end), over MAX_CONFIG_BYTES, not UTF-8,
-            not YAML, or not a mapping.
+            not YAML, a number too long to read, or not a mapping.
     """
     path = Path(path)
     try:
@@ -58,6 +60,8 @@ def load_yaml_file(path: str | Path) -> dict[str, Any]:
         raise ConfigError(f"{path}: not valid YAML: {detail}") from exc
     except RecursionError as exc:
         raise ConfigError(f"{path}: not valid YAML: nested too deeply") from exc
+    except (ValueError, OverflowError) as exc:  # e.g. a whole number of over 4300 digits
+        raise ConfigError(f"{path}: a value out of range: {' '.join(str(exc).split())}") from exc
     if data is None:
         return {}
     if not isinstance(data, dict):
@@ -159,10 +163,14 @@ def _convert(tp: Any, value: Any, path: str) -> Any:
         raise ConfigError(f"{path}: expected true or false, got {_describe(value)}")
     if tp is int:
         if isinstance(value, int) and not isinstance(value, bool):
+            if abs(value) > MAX_CONFIG_INT:
+                raise ConfigError(f"{path}: out of range: {_digits(value)}")
             return value
         raise ConfigError(f"{path}: expected a whole number, got {_describe(value)}")
     if tp is float:
         if isinstance(value, (int, float)) and not isinstance(value, bool):
+            if isinstance(value, int) and abs(value) > sys.float_info.max:
+                raise ConfigError(f"{path}: out of range: {_digits(value)}")
             if not math.isfinite(value):
                 raise ConfigError(f"{path}: expected a finite number, got {value!r}")
             return float(value)
@@ -172,6 +180,13 @@ def _convert(tp: Any, value: Any, path: str) -> Any:
             return value
         raise ConfigError(f"{path}: expected a string, got {_describe(value)}")
     raise TypeError(f"{path}: unsupported config type {tp!r}")
+
+
+def _digits(value: int) -> str:
+    """A whole number for an error message: in full if short, else its first digits."""
+    text = str(abs(value)) if abs(value).bit_length() < 4000 else "a very large number"
+    sign = "-" if value < 0 else ""
+    return f"{sign}{text}" if len(text) <= 24 else f"{sign}{text[:6]}... ({len(text)} digits)"
 
 
 def _check_range(meta: Any, value: Any, path: str) -> None:

@@ -123,3 +123,17 @@ def test_sizes_have_upper_limits_that_fit_the_machine():
                       ({"service": {"abort_wait_s": float("inf")}}, "service.abort_wait_s")):
         with _pytest.raises(ConfigError, match=key.replace(".", r"\.")):
             config_from_mapping(data)
+
+
+@pytest.mark.parametrize("text,message", [
+    ("inner:\n  color: [" + "1" + "0" * 400 + ", 0, 0]\n", "scene.inner.color[0]: out of range"),
+    ("count: " + "9" * 30 + "\n", "scene.count: out of range: 999999... (30 digits)"),
+    ("count: -" + "9" * 5000 + "\n", "big.yaml: a value out of range"),
+])
+def test_numbers_out_of_range_are_one_config_error(tmp_path, text, message):
+    path = tmp_path / "big.yaml"
+    path.write_text(text)
+    with pytest.raises(ConfigError, match=message.replace("[", r"\[").replace("(", r"\(")
+                       .replace(")", r"\)").replace(".", r"\.")) as error:
+        from_mapping(Outer, load_yaml_file(path), "scene")
+    assert "\n" not in str(error.value)
