@@ -17,12 +17,14 @@ from pathlib import Path
 
 from controller.service.config import TcpConfig
 from drivers.core.errors import ConfigError, FineposError
+from drivers.core.files import FileReadError, read_regular_file
 
 logger = logging.getLogger(__name__)
 
 SOCKET_MODE = 0o660
 BACKLOG = 64
 MIN_TOKEN_CHARS = 16
+MAX_TOKEN_FILE_BYTES = 4096  # a token is one short line
 _PROBE_TIMEOUT_S = 1.0
 
 
@@ -88,13 +90,25 @@ def bind_tcp(config: TcpConfig) -> socket.socket:
 
 
 def read_token(token_file: str | Path) -> str:
-    """The TCP token: the first line of ``token_file``, which only its owner may read."""
+    """The TCP token: the first line of ``token_file``, which only its owner may read.
+
+    Raises:
+        ConfigError: the file cannot be read, is not a regular file (a FIFO or a device is
+            never opened for a blocking or endless read), is over MAX_TOKEN_FILE_BYTES, is
+            not UTF-8, is open to group or others, or its token is too short.
+    """
     path = Path(token_file)
     try:
         info = path.stat()
-        text = path.read_text(encoding="utf-8")
+        raw = read_regular_file(path, MAX_TOKEN_FILE_BYTES)  # a FIFO or device: an error
+        text = raw.decode("utf-8")
+    except FileReadError as exc:
+        raise ConfigError(f"service.tcp.token_file: {path}: {exc}") from exc
     except OSError as exc:
-        raise ConfigError(f"service.tcp.token_file: cannot read {path}: {exc}") from exc
+        raise ConfigError(f"service.tcp.token_file: cannot read {path}: "
+                          f"{exc.strerror or exc}") from exc
+    except UnicodeDecodeError as exc:
+        raise ConfigError(f"service.tcp.token_file: {path} is not UTF-8 text") from exc
     if info.st_mode & 0o077:
         raise ConfigError(f"service.tcp.token_file: {path} must not be accessible to group or "
                           f"others (mode {stat.S_IMODE(info.st_mode):o}; chmod 600 it)")

@@ -5,9 +5,11 @@ client limit and the loopback TCP listener's token hold."""
 from __future__ import annotations
 
 import json
+import os
 import random
 import socket
 import threading
+from pathlib import Path
 
 import pytest
 
@@ -207,3 +209,24 @@ def test_tcp_config_refuses_other_hosts_and_open_token_files(tmp_path, short_dir
     token_file.chmod(0o644)
     with pytest.raises(ConfigError, match="must not be accessible to group or others"):
         read_token(token_file)
+
+
+@pytest.mark.parametrize("kind", ["fifo", "device", "too large", "not utf-8"])
+def test_token_files_are_read_bounded_and_never_block(tmp_path, kind):
+    path = tmp_path / "token"
+    if kind == "fifo":
+        os.mkfifo(path, 0o600)  # no writer: a blocking open would never return
+        expected = "token_file: .*not a regular file \\(a FIFO\\)"
+    elif kind == "device":
+        path = Path("/dev/zero")
+        expected = "token_file: /dev/zero: not a regular file \\(a character device\\)"
+    elif kind == "too large":
+        path.write_text("s3cret-token-0123456789\n" + "x" * 10**6)
+        expected = "token_file: .*larger than 4096 bytes"
+    else:
+        path.write_bytes(b"\xff" * 20)
+        expected = "token_file: .* is not UTF-8 text"
+    if path.exists() and not path.is_char_device():
+        path.chmod(0o600)
+    with pytest.raises(ConfigError, match=expected):
+        read_token(path)
