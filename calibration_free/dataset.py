@@ -15,6 +15,7 @@ from __future__ import annotations
 
 import io
 import json
+import math
 import zipfile
 import zlib
 from dataclasses import dataclass, field
@@ -31,6 +32,8 @@ VERSION = 1
 LABEL_COLUMNS = ("dx_mm", "dy_mm", "dphi_deg")
 LABEL_LIMITS = (1000.0, 1000.0, 360.0)  # |label| bounds per column: a damaged file beyond
 MAX_DATASET_BYTES = 4 << 30  # a set of a few hundred compressed images is far smaller
+# The arrays of one set once decoded; a header claiming more is refused before allocation.
+MAX_DATASET_ARRAY_BYTES = 4 << 30
 
 
 @dataclass(frozen=True)
@@ -116,6 +119,7 @@ class Dataset:
         """
         try:
             raw = read_regular_file(path, MAX_DATASET_BYTES)  # never blocks on a FIFO
+            _check_array_headers(raw)
             with np.load(io.BytesIO(raw), allow_pickle=False) as npz:
                 arrays = {k: npz[k] for k in npz.files}
         except (OSError, ValueError, EOFError, KeyError, zipfile.BadZipFile,
@@ -137,6 +141,28 @@ class Dataset:
                        meta.get("samples"), meta.get("metadata") or {})
         except DatasetError as exc:
             raise DatasetError(f"{path}: {exc}") from exc
+
+
+def _check_array_headers(raw: bytes) -> None:
+    """Raise ValueError when an array header of the archive ``raw`` claims more bytes than
+    its member holds or all of them more than MAX_DATASET_ARRAY_BYTES (read before numpy
+    allocates what a header claims)."""
+    total = 0
+    with zipfile.ZipFile(io.BytesIO(raw)) as archive:
+        for info in archive.infolist():
+            with archive.open(info) as member:
+                version = np.lib.format.read_magic(member)
+                read_header = np.lib.format.read_array_header_1_0 if version == (1, 0) else \
+                    np.lib.format.read_array_header_2_0
+                shape, _, dtype = read_header(member)
+                claimed = math.prod(shape) * dtype.itemsize
+                if claimed > info.file_size - member.tell():
+                    raise ValueError(f"{info.filename}: its header claims {claimed} bytes, "
+                                     f"the archive holds {info.file_size}")
+            total += claimed
+            if total > MAX_DATASET_ARRAY_BYTES:
+                raise ValueError(f"{info.filename}: the arrays exceed "
+                                 f"{MAX_DATASET_ARRAY_BYTES} bytes")
 
 
 def grid_offsets(a_mm: float, b_deg: float, shape: tuple[int, int, int] = (3, 3, 7)) \

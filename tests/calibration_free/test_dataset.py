@@ -167,3 +167,21 @@ def test_labels_beyond_any_grid_are_refused_at_load(tmp_path):
     np.savez(tmp_path / "bad.npz", **arrays)
     with _pytest.raises(DatasetError, match=r"bad\.npz: labels: dx_mm reaches 1e\+308"):
         Dataset.load(tmp_path / "bad.npz")
+
+
+def test_an_array_header_claiming_too_much_is_refused_before_allocation(tmp_path):
+    """Issue 51: a header claiming 10^8 images gave MemoryError (7.54 TiB)."""
+    path = tmp_path / "set.npz"
+    sample_set().save(path)
+    with np.load(path) as npz:
+        arrays = {k: npz[k] for k in npz.files if k != "images"}
+    header = io.BytesIO()
+    np.lib.format.write_array_header_1_0(header, {"descr": "|u1", "fortran_order": False,
+                                                   "shape": (10**8, 480, 640, 3)})
+    bad = tmp_path / "huge.npz"
+    np.savez(bad, **arrays)
+    import zipfile
+    with zipfile.ZipFile(bad, "a") as archive:
+        archive.writestr("images.npy", header.getvalue() + bytes(64))
+    with pytest.raises(DatasetError, match=r"huge\.npz: .*images\.npy: its header claims"):
+        Dataset.load(bad)
