@@ -38,9 +38,11 @@ from sim_backend.cell.scene_config import PartKind, SceneConfig
 class GridConfig:
     """One acquisition grid: displacements in [-a, a] x [-a, a] x [-b, b] on ``shape`` points.
 
-    b_deg: None means 180/kappa (the object's whole symmetry period); staggered: each position
-    takes its rotations shifted by another fraction of their spacing, so the grid shows
-    nx * ny * nphi distinct rotations instead of nphi (``dataset.staggered_grid_offsets``).
+    a_mm: the largest displacement along the tool's x and y; b_deg: the largest turn (None:
+    180/kappa, the part's whole symmetry period); shape: grid points along x, y and the turn;
+    staggered: each position takes its rotations shifted by another fraction of their
+    spacing, so the grid shows nx * ny * nphi distinct rotations instead of nphi
+    (``dataset.staggered_grid_offsets``).
     """
 
     a_mm: float = field(default=25.0, metadata={"min": 0.0})
@@ -60,10 +62,14 @@ class Nn2GridConfig(GridConfig):
 
 @dataclass(frozen=True)
 class AcquisitionConfig:
-    """Config section ``controller.acquisition``: the NN1 and NN2 training grids (paper
-    defaults), the random test set, and the frames each grid set first takes at the taught
-    pose itself (``taught_pose_frames``: NN1's zero is pinned on them and both networks
-    train on them, ``controller.teach.acquisition.acquire``)."""
+    """Config section ``controller.acquisition``.
+
+    nn1 / nn2: the NN1 and NN2 training grids (the paper's, NN2's staggered); test_count: images
+    in the random test set (``finepos acquire --set test``); taught_pose_frames: frames each
+    grid set first takes at the taught pose itself, each after its own approach (the
+    translation nets are pinned on them and both networks train on them,
+    ``controller.teach.acquisition.acquire``).
+    """
 
     nn1: GridConfig = GridConfig()
     nn2: Nn2GridConfig = Nn2GridConfig()
@@ -75,8 +81,9 @@ class AcquisitionConfig:
 class PathsConfig:
     """Config section ``controller.paths``: where state, datasets, models and logs go.
 
-    state_dir holds one folder per taught part (``<part>/cell.json``, ``<part>/datasets/``,
-    ``<part>/model-<system>.<suffix>``; ``controller.teach.state_folder``).
+    state_dir: one folder per taught part (``<part>/cell.json``, ``<part>/datasets/``,
+    ``<part>/model-<system>.<suffix>``; ``controller.teach.state_folder``); log_dir: the
+    iteration logs (one JSON record per look; the service's ``iterations.jsonl``).
     """
 
     state_dir: str = "state"

@@ -1,6 +1,7 @@
-"""``finepos sim ...`` (the simulated cell and its device emulators) and ``finepos bench ...``
-(benchmarks that print JSON numbers: medians, ratios): command groups whose leaves live in
-other packages (see ``controller.commands.leaves``)."""
+"""``finepos sim ...`` (the simulated cell and its device emulators), ``finepos bench ...``
+(benchmarks that print JSON numbers: medians, ratios) and ``finepos docs ...`` (reference pages
+generated from the code): command groups whose leaves live in other packages (see
+``controller.commands.leaves``)."""
 
 from controller.commands.leaves import register_group
 
@@ -22,9 +23,17 @@ BENCH_LEAVES = {
     "recording": "controller.recording.bench",
 }
 
+DOCS_LEAVES = {
+    "config": "controller.docs.config_reference",
+    "results": "controller.docs.results_page",
+}
+
 
 def register(subparsers) -> None:
-    """Add ``finepos sim`` and ``finepos bench``, one leaf per entry of their tables."""
+    """Add ``finepos sim``, ``finepos bench`` and ``finepos docs``, one leaf per entry of their
+    tables."""
     register_group(subparsers, "sim", "the simulated work cell and device emulators",
                    SIM_LEAVES)
     register_group(subparsers, "bench", "benchmarks that print JSON", BENCH_LEAVES)
+    register_group(subparsers, "docs", "write the reference pages generated from the code",
+                   DOCS_LEAVES)

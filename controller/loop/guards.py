@@ -21,6 +21,7 @@ class Guard:
 
     quantity: a wrench component or ``force_n`` (magnitude of the force vector);
     op: ``>`` / ``<`` compare the signed value, ``abs>`` its magnitude;
+    limit: the value compared with (N for forces, N*m for torques);
     action: ``stop`` (end the motion where it is) or ``retreat`` (end it and back off);
     name: what the guard protects against, used in reports.
     """

@@ -92,13 +92,15 @@ class LoopConfig:
     ``settle_deg`` (the loop is settling at the taught pose) reads this many frames (1: every
     look reads one frame, the paper's loop): near the pose the readings' frame-to-frame noise
     is as large as what is left to correct, in a dim frame more so;
+    settle_mm / settle_deg: the step a full look's first frame reads within which the look is
+    a settling look;
     settle_max_frames / settle_sem_mm / settle_sem_deg: after its ``settle_frames`` such a
     look reads more frames, up to ``settle_max_frames`` in all, while the standard error of
     the mean step (each axis' frame-to-frame standard deviation over the root of the frames
     read) is above ``settle_sem_mm`` in x or y or ``settle_sem_deg`` in the turn: a noisy
     camera (a high gain in a dim cell) gets the frames it needs, a quiet one is not slowed
-    (default 0.025 mm and 0.1 deg, README change 29; None: that axis sets no bound; both
-    None: ``settle_frames`` frames, always);
+    (default 0.025 mm and 0.1 deg, docs/decisions/0008-settling-looks.md; None: that axis sets
+    no bound; both None: ``settle_frames`` frames, always);
     settle_average: how those frames make one step: ``frames``, the step read from their
     mean frame (the camera's noise averaged out before the part's edge is read: in a dim
     frame's shadows some noisy pixels join the part's blob, which moves its centre one way

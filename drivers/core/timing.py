@@ -52,9 +52,12 @@ class ArmTiming:
 
 @dataclass(frozen=True)
 class CameraTiming:
-    """Section ``timing.camera``: frame_rate_hz (frames start every 1/rate s), exposure_s (how
-    long each is exposed; the arm moving meanwhile blurs it), latency_frames (frame periods
-    from the end of an exposure to its delivery). Judgements for a typical USB/network camera."""
+    """Section ``timing.camera``: judgements for a typical USB/network camera.
+
+    frame_rate_hz: frames start every 1/rate s; exposure_s: how long each is exposed (the arm
+    moving meanwhile blurs it); latency_frames: frame periods from the end of an exposure to
+    its delivery.
+    """
 
     frame_rate_hz: float = field(default=30.0, metadata={"min": 0.5, "max": 1000.0})
     exposure_s: float = field(default=0.01, metadata={"min": 0.0, "max": 1.0})
