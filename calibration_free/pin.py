@@ -6,9 +6,9 @@ turn there as labelled: zero. The loop feeds the rotation-aware nets (``nn1_rot`
 correction) what NN2, or an elongated part's axis map, reads instead, and NN2's fit does not
 read exactly zero there: the nut's, with its strong weight decay and widened copies, reads
 0.15-0.27 deg on its own taught-pose frames, which ``nn1_rot`` turned into +0.005 mm of y
-(README change 24). ``pinned`` shifts the nets once more, by what they read on those frames
-through ``Perception``, the loop's own path; ``calibration_free.rezero`` does the same on frames
-taken later in another light.
+(docs/decisions/0006-taught-pose-frames-and-pinning.md). ``pinned`` shifts the nets once
+more, by what they read on those frames through ``Perception``, the loop's own path;
+``calibration_free.rezero`` does the same on frames taken later in another light.
 """
 
 from __future__ import annotations

@@ -27,7 +27,8 @@ each heading reads, against the plain re-zero's zero (the part where it was taug
 zero of the translation. The part then lies where the arm's repeatability puts it (on the
 simulated cell within 0.01-0.03 mm of the jaws' middle), whatever the set-downs before; each
 centring scatters by that much, so a reference taken from the two centrings at the taught
-heading would put their common error into every heading's zero (change 30 in the README).
+heading would put their common error into every heading's zero
+(docs/decisions/0012-rezero-by-heading.md).
 
 The other parts (the nut, the ledge, the screw) the jaws centre across themselves only, and
 their set-downs do not slide them evenly (the screw: none at most, 0.06 mm along its shank
