@@ -3,7 +3,7 @@
 Training pins the translation nets to read zero on the frames taken at the taught pose
 (``training._train_pinned``): that is where the loop settles. Under another light (a low side
 lamp, the room dimmed) the part's silhouette itself changes by a quarter to half a pixel (its
-side faces and bevels shade differently; README "Where the remaining error comes from"), the
+side faces and bevels shade differently; docs/decisions/0011-rezero-in-the-cells-light.md), the
 nets read 0.2-0.3 mm at the taught pose, and the loop settles that far off. Frames taken at the
 taught pose in the new light move the nets' zero back there, without a new acquisition: the
 same shift of each net's output that training applied, measured again. NN2's reading there is
@@ -22,9 +22,9 @@ The report also tells how much of the part the camera clips there (``clipped_sha
 part's pixels in the frames, those with a channel at 255). An auto-exposure that keeps a dark
 frame's mean grey up drives a lamp-lit face into white; where part of the outline is clipped,
 what the centre reads there depends on the camera's gain from one look to the next, which no
-zero takes away (README "Expose for the part": under the poor preset's lamp, a fifth of the
-cube's pixels clipped and its x scattered 0.058 mm after 2.5 loops; exposed for the part,
-0.042 mm).
+zero takes away (docs/decisions/0013-expose-for-the-part.md: under the poor preset's lamp, a
+fifth of the cube's pixels clipped and its x scattered 0.058 mm after 2.5 loops; exposed for
+the part, 0.042 mm).
 """
 
 from __future__ import annotations
@@ -92,7 +92,7 @@ def rezero(bundle: ModelBundle, images: Sequence[np.ndarray], average: int = 1) 
     groups of this many (the last one may be smaller), as the loop's settling look reads its
     step on the mean of ``settle_frames`` frames: in a dark frame the camera's noise moves
     what the nets read, so a zero read on single frames sits off the one the loop reads
-    (README "Re-zero in the cell's light"). A mean that does not show the part whole
+    (docs/decisions/0011-rezero-in-the-cells-light.md). A mean that does not show the part whole
     leaves all its frames out of the seen-whole share.
 
     Raises:

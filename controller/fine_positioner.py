@@ -43,10 +43,10 @@ logger = logging.getLogger(__name__)
 # The systems ``rezero`` moves the zero of.
 REZERO_SYSTEMS = ("gabor", "align")
 # Frames ``rezero`` takes at the taught pose (training pinned the nets on 4 + 4): read three
-# at a time, eight means; fewer leave more of the dark frame's noise in the zero (README
-# "Re-zero in the cell's light"). 0.8 s at 30 frames a second. Where the loop's settling look
-# reads more frames at a time in that light (``LoopConfig.settle_count``) it takes more, so
-# that two whole such means fit.
+# at a time, eight means; fewer leave more of the dark frame's noise in the zero
+# (docs/decisions/0011-rezero-in-the-cells-light.md). 0.8 s at 30 frames a second. Where the
+# loop's settling look reads more frames at a time in that light (``LoopConfig.settle_count``)
+# it takes more, so that two whole such means fit.
 REZERO_FRAMES = 24
 
 DATASETS = ("nn1", "nn2", "test")
@@ -298,7 +298,8 @@ class FinePositioner:
                 logger.warning("rezero: the camera clips %.0f%% of the part's pixels at the "
                                "taught pose in this light (a channel at 255): bring its "
                                "exposure down until the part's brightest face is not white "
-                               "(README \"Expose for the part\")", 100 * done.clipped_share)
+                               "(docs/decisions/0013-expose-for-the-part.md)",
+                               100 * done.clipped_share)
         if heading_step_deg is not None:
             estimator = SYSTEMS[system].estimator(dataclasses.replace(model, model=moved))
             table = read_heading_zero(self, estimator, turns, frames, average)
@@ -419,5 +420,6 @@ def _warn_if_too_noisy(loop: LoopConfig, scatter: tuple[float, float, float] | N
     logger.warning("rezero: single frames at the taught pose scatter by %.3f / %.3f mm and "
                    "%.2f deg in this light; a settling look's %d frames still leave %.3f mm "
                    "and %.2f deg in its mean step, above controller.loop.settle_sem_mm / "
-                   "settle_sem_deg: lower the camera's gain (README \"Expose for the part\")",
+                   "settle_sem_deg: lower the camera's gain "
+                   "(docs/decisions/0013-expose-for-the-part.md)",
                    *scatter, loop.settle_max_frames, max(left[0], left[1]), left[2])

@@ -8,7 +8,7 @@
 # removing it; the container itself is always shut down. --config: the service config to
 # install (default deploy/finepos.yaml; its devices must be the simulated cell for the jobs).
 #
-# The unit and the config are installed unchanged, as the README's "Running as a service" says
+# The unit and the config are installed unchanged, as docs/service.md says
 # (finepos user in dialout, /etc/finepos/finepos.yaml, unit in /etc/systemd/system).
 # /opt/finepos/.venv is a small venv over this checkout's .venv (bound read-only), so ExecStart
 # is the unit's own. Steps, each printed PASS or FAIL:
@@ -152,7 +152,7 @@ case "$STATE" in running|degraded) echo "container booted: systemd $(ct systemct
     *) cat "$WORK/nspawn.log"; die "container did not boot (state: ${STATE:-none})";;
 esac
 
-# -- install as the README says --------------------------------------------------------------
+# -- install as docs/service.md says ----------------------------------------------------------
 cp "$CONFIG" "/proc/$LEADER/root/run/finepos-check.yaml" || die "cannot copy $CONFIG"
 SITE=lib/python$PYVER/site-packages
 ct sh -ec "

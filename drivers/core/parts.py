@@ -37,8 +37,8 @@ class Part:
         jaw_opening_mm: how wide the jaws open before the descent: a little wider than the
             part (1.5 mm either side), which sets the grasp's tolerance (the paper's cube is
             "little smaller than the open gripper"; 33 mm for our 30 mm cube, whose 6 mm
-            rounded edges would let 34 mm jaws pass it turned by 14.6 deg: README, "Grasp
-            tolerance").
+            rounded edges would let 34 mm jaws pass it turned by 14.6 deg: ``finepos
+            grasp-sweep`` measures it).
         mass_g: the part's mass (the weight the wrist sensor feels while it is held, which
             the grasp check measures; the simulated part's dynamic mass).
         material: what the part is made of (the simulated part's friction).

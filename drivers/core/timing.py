@@ -1,7 +1,7 @@
 """The cell's timing model, in one place: serial wire time, arm motion time, hand, camera, sensor.
 
 Config section ``timing`` (every figure configurable; ``scene.timing: realistic | ideal`` picks
-whether the simulated cell and the emulators take these times at all). Sources, as the README
+whether the simulated cell and the emulators take these times at all). Sources, as docs/simulator.md
 lists them: the VAL line's 9600 baud 8N1 is confirmed on real PUMA 260s; the ATI controller's
 38400 baud comes from a public driver; V+ ``HAND.TIME`` defaults to 0.5 s; VAL ``SPEED`` takes
 0.01..327.67 with 100 normal. No public source gives the PUMA 260's joint speeds, accelerations

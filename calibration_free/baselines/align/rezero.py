@@ -2,10 +2,11 @@
 
 The servo settles where the part's silhouette registers to its template with no shift and no
 turn: the template, the mean silhouette of the frames taken at the taught pose, is its zero.
-Under another light the silhouette itself changes by a quarter to half a pixel (README "Where
-the remaining error comes from"), and the servo settles 0.1-0.3 mm off. As ``finepos rezero``
-moves the Gabor nets' zero (``calibration_free.rezero``), the template is taken again from
-frames at the taught pose in the new light, cut at the same reference point; the fitted maps
+Under another light the silhouette itself changes by a quarter to half a pixel
+(docs/decisions/0011-rezero-in-the-cells-light.md), and the servo settles 0.1-0.3 mm off.
+As ``finepos rezero`` moves the Gabor nets' zero (``calibration_free.rezero``), the template
+is taken again from frames at the taught pose in the new light, cut at the same reference
+point; the fitted maps
 from the registration to the tool step stay as trained. The same checks guard it: the part
 seen whole in most frames, and what the servo reads there within MAX_SHIFT_MM and
 MAX_TURN_DEG (farther, the part is not where it was taught, or the camera moved).
