@@ -14,6 +14,7 @@ import logging
 import os
 import signal
 import sys
+import textwrap
 import threading
 
 from controller.commands.leaves import add_leaf
@@ -35,6 +36,13 @@ COMMAND_MODULES = (
     "controller.commands.replay",
 )
 
+# How ``finepos --help`` groups the subcommands: what a cell runs first, in this order (any
+# command not named in either list follows them), then what measures and compares.
+CELL_COMMANDS = ("serve", "ctl", "teach", "acquire", "train", "rezero", "position", "grasp",
+                 "check", "fit-timing", "replay", "sim", "demo")
+RESEARCH_COMMANDS = ("evaluate", "table1", "filter-search", "compare", "grasp-sweep", "bench",
+                     "docs")
+
 logger = logging.getLogger("finepos")
 
 
@@ -44,6 +52,7 @@ def build_parser() -> argparse.ArgumentParser:
         prog="finepos",
         description="Calibration-free visual fine positioning for a camera-in-hand robot arm.",
         epilog="Example: finepos sim snapshot --out hand.png --offset 10,-5,20",
+        formatter_class=argparse.RawDescriptionHelpFormatter,
     )
     parser.add_argument("-v", "--verbose", action="store_true", help="debug logging on stderr")
     sub = parser.add_subparsers(dest="command", metavar="COMMAND", required=True)
@@ -53,7 +62,35 @@ def build_parser() -> argparse.ArgumentParser:
             module.register(sub)
         else:  # one subcommand, named after its module (fit_timing: fit-timing)
             add_leaf(sub, name.rpartition(".")[2].replace("_", "-"), module)
+    _group_commands(parser, sub)
     return parser
+
+
+def _group_commands(parser: argparse.ArgumentParser, sub) -> None:
+    """List the subcommands in ``--help`` as two groups, the cell's commands first and the
+    research commands (``RESEARCH_COMMANDS``) after them, in place of argparse's one list."""
+    helps = {action.dest: action.help for action in sub._choices_actions}
+    cell = [name for name in CELL_COMMANDS if name in helps]
+    cell += [name for name in helps if name not in cell and name not in RESEARCH_COMMANDS]
+    research = [name for name in RESEARCH_COMMANDS if name in helps]
+    width = max(len(name) for name in helps) + 2
+    wrap = 100 - width - 2
+
+    def listing(names: list[str]) -> list[str]:
+        lines = []
+        for name in names:
+            # leaf helps are %-escaped for argparse; the description is printed as it is
+            text = textwrap.wrap((helps[name] or "").replace("%%", "%"), wrap) or [""]
+            lines.append(f"  {name:<{width}}{text[0]}")
+            lines += [" " * (width + 2) + more for more in text[1:]]
+        return lines
+
+    parser.description = "\n".join([
+        parser.description, "", "cell commands (each: finepos COMMAND --help):",
+        *listing(cell), "", "research commands (measure, compare, document):",
+        *listing(research)])
+    sub.help = argparse.SUPPRESS  # the grouped listing above replaces argparse's own
+    parser.usage = "%(prog)s [-h] [-v] COMMAND ..."
 
 
 def setup_logging(verbose: bool) -> None:
