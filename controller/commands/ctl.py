@@ -11,6 +11,7 @@ from __future__ import annotations
 
 import argparse
 import json
+import math
 import sys
 
 from controller.commands.common import parse_triple
@@ -46,8 +47,10 @@ def _client(args) -> ServiceClient:
     if args.tcp is None:
         return ServiceClient(args.socket, timeout_s=args.timeout)
     host, _, port = args.tcp.rpartition(":")
-    if not host or not port.isdigit() or not args.token_file:
-        raise ConfigError(f"--tcp: expected HOST:PORT and --token-file FILE, got {args.tcp!r}")
+    port_ok = port.isascii() and port.isdigit() and 1 <= int(port) <= 65535
+    if not host or not port_ok or not args.token_file:
+        raise ConfigError(f"--tcp: expected HOST:PORT (port 1..65535) and --token-file FILE, "
+                          f"got {args.tcp!r}")
     token = read_token(args.token_file)
     return ServiceClient(tcp=(host, int(port)), token=token, timeout_s=args.timeout)
 
@@ -91,6 +94,24 @@ def _stream(client: ServiceClient, count: int | None) -> int:
     return 0
 
 
+def _positive_seconds(text: str) -> float:
+    """``--timeout``: a positive, finite number of seconds."""
+    try:
+        value = float(text)
+    except ValueError:
+        value = math.nan
+    if not (math.isfinite(value) and value > 0):
+        raise argparse.ArgumentTypeError(f"expected a positive number of seconds, got {text!r}")
+    return value
+
+
+def _positive_count(text: str) -> int:
+    """``--count``: a whole number of at least 1."""
+    if not (text.isascii() and text.strip().isdigit()) or int(text) < 1:
+        raise argparse.ArgumentTypeError(f"expected a whole number >= 1, got {text!r}")
+    return int(text)
+
+
 def _add_option(parser: argparse.ArgumentParser, name: str, spec: Arg) -> None:
     flag = "--" + name.replace("_", "-")
     if spec.kind is bool:
@@ -112,7 +133,7 @@ def register(subparsers) -> None:
                    help=f"the service's control socket (default {DEFAULT_SOCKET})")
     p.add_argument("--tcp", metavar="HOST:PORT", help="use the loopback TCP listener instead")
     p.add_argument("--token-file", metavar="FILE", help="the TCP listener's token file")
-    p.add_argument("--timeout", type=float, default=30.0, metavar="S",
+    p.add_argument("--timeout", type=_positive_seconds, default=30.0, metavar="S",
                    help="seconds to wait for an answer (job commands that wait: no limit)")
     sub = p.add_subparsers(dest="ctl_command", metavar="COMMAND", required=True)
     for name, (example, what) in LEAVES.items():
@@ -127,5 +148,6 @@ def register(subparsers) -> None:
             leaf.add_argument("--no-wait", action="store_true",
                               help="answer as soon as the job started")
         if name == "stream":
-            leaf.add_argument("--count", type=int, metavar="N", help="stop after N events")
+            leaf.add_argument("--count", type=_positive_count, metavar="N",
+                              help="stop after N events (N >= 1)")
     p.set_defaults(func=cmd_ctl)

@@ -11,11 +11,17 @@ from __future__ import annotations
 import itertools
 import json
 import socket
+import time
 from collections.abc import Iterator
 from pathlib import Path
 from typing import Any
 
 from drivers.core.errors import FineposError
+
+# Longest answer or event line read from the service (a status or an iteration record is a few
+# KB); a longer one is refused before it grows further.
+MAX_LINE_BYTES = 1 << 20
+_RECV_BYTES = 65536
 
 
 class ServiceError(FineposError):
@@ -29,6 +35,15 @@ class ServiceError(FineposError):
 
 class ServiceUnavailable(FineposError):
     """No service answers at the given address (not running, wrong path, no permission)."""
+
+
+class ServiceTimeout(FineposError, TimeoutError):
+    """No complete answer line within the timeout (bytes trickling in do not extend it)."""
+
+
+class ServiceProtocolError(FineposError):
+    """What came back is no answer of the control protocol: not JSON, not a JSON object, or
+    a line longer than MAX_LINE_BYTES."""
 
 
 class ServiceClient:
@@ -50,14 +65,14 @@ class ServiceClient:
         except OSError as exc:
             raise ServiceUnavailable(f"cannot connect to the finepos service at {where}: "
                                      f"{exc.strerror or exc}") from exc
-        self._file = self._sock.makefile("rb")
+        self._buffer = bytearray()  # received, not yet returned as a line
+        self._event_timeout_s: float | None = None
         self._ids = itertools.count(1)
         if token is not None:
             self.call("auth", token=token)
 
     def close(self) -> None:
         """Close the connection to the service."""
-        self._file.close()
         self._sock.close()
 
     def __enter__(self) -> ServiceClient:
@@ -67,13 +82,22 @@ class ServiceClient:
         self.close()
 
     def send_line(self, line: bytes, timeout_s: float | None = 30.0) -> dict[str, Any]:
-        """Send raw bytes (one line, newline added) and return the parsed response line."""
+        """Send raw bytes (one line, newline added) and return the parsed response line,
+        complete within ``timeout_s`` (None: no limit).
+
+        Raises:
+            ServiceTimeout: no complete line within ``timeout_s``.
+            ServiceProtocolError: the line is not a JSON object, or longer than MAX_LINE_BYTES.
+            ServiceUnavailable: the service closed the connection.
+        """
         self._sock.settimeout(timeout_s)
         try:
             self._sock.sendall(line + b"\n")
         except (BrokenPipeError, ConnectionResetError):
             pass  # refused at connect: the service's one answer is waiting to be read
-        return self._read()
+        except TimeoutError as exc:
+            raise ServiceTimeout(f"the service took no request within {timeout_s:g} s") from exc
+        return self._read(timeout_s)
 
     def request(self, cmd: str, args: dict[str, Any] | None = None,
                 timeout_s: float | None = 30.0) -> dict[str, Any]:
@@ -85,29 +109,60 @@ class ServiceClient:
         """The result of one request (raises ServiceError on an error response)."""
         response = self.request(cmd, args, timeout_s)
         if not response.get("ok"):
-            error = response.get("error") or {}
+            error = response.get("error")
+            if not isinstance(error, dict):
+                raise ServiceProtocolError(f"the service's answer to {cmd} has neither a result "
+                                           "nor an error")
             raise ServiceError(str(error.get("code")), str(error.get("message")))
+        if "result" not in response:
+            raise ServiceProtocolError(f"the service's answer to {cmd} has no result")
         return response["result"]
 
     def events(self, timeout_s: float | None = None) -> Iterator[dict[str, Any]]:
         """Start streaming now; the iterator yields events until the service ends the stream
         (``timeout_s`` bounds the wait for each)."""
         self.call("stream")
-        self._sock.settimeout(timeout_s)
-        return self._events()
+        return self._events(timeout_s)
 
-    def _events(self) -> Iterator[dict[str, Any]]:
+    def _events(self, timeout_s: float | None) -> Iterator[dict[str, Any]]:
         while True:
-            event = self._read()
+            event = self._read(timeout_s)
             yield event
             if event.get("event") == "end":
                 return
 
-    def _read(self) -> dict[str, Any]:
+    def _read(self, timeout_s: float | None) -> dict[str, Any]:
+        """The next line as a JSON object, complete within ``timeout_s`` (None: no limit)."""
+        deadline = None if timeout_s is None else time.monotonic() + timeout_s
+        while (end := self._buffer.find(b"\n")) < 0:
+            if len(self._buffer) > MAX_LINE_BYTES:
+                raise ServiceProtocolError(f"the service sent a line longer than "
+                                           f"{MAX_LINE_BYTES} bytes")
+            if deadline is not None:
+                remaining_s = deadline - time.monotonic()
+                if remaining_s <= 0:
+                    raise ServiceTimeout(f"no complete answer from the service within "
+                                         f"{timeout_s:g} s")
+                self._sock.settimeout(remaining_s)
+            else:
+                self._sock.settimeout(None)
+            try:
+                chunk = self._sock.recv(_RECV_BYTES)
+            except TimeoutError:
+                continue  # the deadline check above says so
+            except ConnectionResetError:
+                chunk = b""
+            if not chunk:
+                raise ServiceUnavailable("the finepos service closed the connection")
+            self._buffer += chunk
+        line = bytes(self._buffer[:end])
+        del self._buffer[:end + 1]
         try:
-            line = self._file.readline()
-        except ConnectionResetError:
-            line = b""
-        if not line:
-            raise ServiceUnavailable("the finepos service closed the connection")
-        return json.loads(line)
+            message = json.loads(line)
+        except (ValueError, RecursionError) as exc:
+            raise ServiceProtocolError(f"the service sent a line that is not JSON: "
+                                       f"{line[:60]!r}") from exc
+        if not isinstance(message, dict):
+            raise ServiceProtocolError(f"the service sent {type(message).__name__}, not a JSON "
+                                       "object")
+        return message
