@@ -15,9 +15,13 @@ touched.
 from __future__ import annotations
 
 import base64
+import contextlib
+import fcntl
 import json
 import logging
 import math
+import os
+import secrets
 import threading
 import time
 from collections.abc import Callable
@@ -108,9 +112,16 @@ class RunRecorder:
         self._lock = threading.Lock()
         self._last_ns = 0
         self.looks = 0
+        # Written under a temporary name beside the file (created anew, never through a link,
+        # locked so remove_stale_temp_files leaves it alone) and renamed over it once complete.
+        self._tmp = self.path.parent / f".{self.path.name}.{secrets.token_hex(4)}.tmp"
+        self._error: str | None = None  # the first failed write: close() reports it
         try:
             self.path.parent.mkdir(parents=True, exist_ok=True)
-            self._file = open(self.path, "wb")  # noqa: SIM115 (closed by close())
+            fd = os.open(self._tmp, os.O_WRONLY | os.O_CREAT | os.O_EXCL | os.O_NOFOLLOW
+                         | os.O_CLOEXEC, 0o644)
+            fcntl.flock(fd, fcntl.LOCK_EX)
+            self._file = os.fdopen(fd, "wb")
         except OSError as exc:
             raise RecordingError(f"recording {self.path}: {exc.strerror or exc}") from None
         self._writer = Writer(self._file, compression=CompressionType.ZSTD)
@@ -125,13 +136,39 @@ class RunRecorder:
 
     # -- lifecycle -----------------------------------------------------------------------
     def close(self) -> None:
-        """Finish the file (summary and index); later calls do nothing."""
+        """Finish the file (summary and index), sync it and rename it into place; later calls
+        do nothing.
+
+        Raises:
+            RecordingError: a write failed (a full disk): no file is left at ``path`` (an
+                older one there stays), nor a partial one beside it.
+        """
         with self._lock:
             if self._closed:
                 return
             self._closed = True
-            self._writer.finish()
-            self._file.close()
+            try:
+                if self._error is None:
+                    self._writer.finish()
+                    self._file.flush()
+                    os.fsync(self._file.fileno())
+                self._file.close()
+                if self._error is None:
+                    os.replace(self._tmp, self.path)  # replaces a link there, never follows it
+            except OSError as exc:
+                self._error = exc.strerror or str(exc)
+            if self._error is not None:
+                with contextlib.suppress(OSError):
+                    self._file.close()
+                with contextlib.suppress(FileNotFoundError):
+                    os.unlink(self._tmp)
+                raise RecordingError(f"recording {self.path} not written: {self._error}")
+        with contextlib.suppress(OSError):
+            dir_fd = os.open(self.path.parent, os.O_RDONLY)
+            try:
+                os.fsync(dir_fd)
+            finally:
+                os.close(dir_fd)
 
     def __enter__(self) -> RunRecorder:
         return self
@@ -145,8 +182,14 @@ class RunRecorder:
                                                                   separators=(",", ":"))
         t_ns = max(t_ns, self._last_ns)  # log time never goes back within a file
         self._last_ns = t_ns
-        self._writer.add_message(self._channels[topic], log_time=t_ns, data=data.encode(),
-                                 publish_time=t_ns)
+        if self._error is not None:
+            return
+        try:
+            self._writer.add_message(self._channels[topic], log_time=t_ns, data=data.encode(),
+                                     publish_time=t_ns)
+        except OSError as exc:  # the run goes on unrecorded; close() reports the failure
+            self._error = exc.strerror or str(exc)
+            logger.error("recording %s failed: %s", self.path, self._error)
 
     def _take(self, run_id: str) -> bool:
         """Whether looks of ``run_id`` are recorded (the first ``max_runs`` runs are)."""

@@ -23,6 +23,7 @@ import contextlib
 import json
 import logging
 import os
+import re
 import threading
 import time
 from collections.abc import Callable
@@ -68,6 +69,7 @@ TICK_S = 0.5  # longest sleep of the control loop (it wakes at once for stop, re
 # What an abort answer tells the operator when the arm did not acknowledge the halt.
 PENDANT_STOP = ("the arm's controller did not acknowledge a halt: if the arm may be moving, "
                 "press the stop button on the teach pendant")
+_RECORDING_NAME = re.compile(r"job-(\d{1,9})-\w+\.mcap")  # what _job_recording writes
 _REFUSAL_CODES = {State.STARTING: "not_ready", State.FAULT: "fault", State.STOPPING: "stopping"}
 
 
@@ -130,6 +132,7 @@ class Service:
         token = read_token(cfg.service.tcp.token_file) if cfg.service.tcp is not None else None
         log_path = Path(cfg.controller.paths.log_dir) / ITERATION_LOG_NAME
         self._remove_stale_temp_files()
+        self._next_job_id = _first_free_job_id(cfg.service.record_dir)
         with contextlib.ExitStack() as stack:
             self._log = stack.enter_context(IterationLog(log_path))
             self._log.subscribe(self._on_record)
@@ -571,9 +574,10 @@ class Service:
         return live
 
     @contextlib.contextmanager
-    def _job_recording(self, job: Job, fp: FinePositioner):
+    def _job_recording(self, job: Job, fp: FinePositioner, failures: list[str]):
         """Record a position or grasp job (``service.record_dir``: ``job-<id>-<kind>.mcap``)
-        and show its looks on the live view, for the job's duration."""
+        and show its looks on the live view, for the job's duration; a recording that could
+        not be written is appended to ``failures`` (the job's result reports it)."""
         record_dir = self.config.service.record_dir
         recorders = []
         if record_dir is not None and job.kind in ("position", "grasp"):
@@ -596,8 +600,9 @@ class Service:
                 if recorder is not self._live_view:
                     try:
                         recorder.close()
-                    except OSError as exc:
-                        logger.warning("job %d: recording not finished: %s", job.id, exc)
+                    except (FineposError, OSError) as exc:
+                        logger.error("job %d: %s", job.id, exc)
+                        failures.append(str(exc))
 
     def _job_positioner(self, job: Job) -> FinePositioner:
         """The positioner of the job's part (device lock held): on the simulated cell that part
@@ -622,16 +627,19 @@ class Service:
     def _run_job(self, job: Job) -> None:
         exc: Exception | None = None
         result = None
+        recording_failures: list[str] = []
         try:
             with self._device_lock:
                 fp = self._job_positioner(job)
-                with self._job_recording(job, fp):
+                with self._job_recording(job, fp, recording_failures):
                     result = BODIES[job.kind](JobContext(fp, job.args,
                                                          self._models.slot(job.args["part"])))
         except JobFailed as failed:
             exc, result = failed, failed.result
         except Exception as error:  # classified below: every way a job can end is reported
             exc = error
+        if recording_failures:
+            result = {**(result or {}), "recording_error": recording_failures[0]}
         outcome, reason = classify(exc, job.abort.is_set(), self._cell.not_active())
         if exc is not None and not isinstance(exc, FineposError):
             logger.error("job %d (%s) raised", job.id, job.kind, exc_info=exc)
@@ -799,3 +807,17 @@ class Service:
         logger.info("models reloaded: %s", {kind: self._models.info(kind) for kind in models})
         return {"model": self._models.info(self._part),
                 "models": {kind: self._models.info(kind) for kind in models}}
+
+
+def _first_free_job_id(record_dir: str | None) -> int:
+    """The first job id after those of the recordings in ``record_dir`` (1 when there are
+    none), so a restarted service never writes over an earlier run's recording."""
+    if record_dir is None:
+        return 1
+    try:
+        names = [entry.name for entry in os.scandir(record_dir)]
+    except OSError:
+        return 1
+    ids = [int(match.group(1)) for name in names
+           if (match := _RECORDING_NAME.fullmatch(name)) is not None]
+    return max(ids, default=0) + 1

@@ -147,3 +147,33 @@ def test_bad_recording_arguments_are_one_line_errors(tmp_path):
     (tmp_path / "file").write_text("")
     with pytest.raises(RecordingError, match="x.mcap"):
         RunRecorder(tmp_path / "file" / "x.mcap")
+
+
+def test_a_planted_link_is_replaced_not_followed(tmp_path):
+    target = tmp_path / "precious.txt"
+    target.write_text("keep me")
+    path = tmp_path / "rec" / "job-00001-position.mcap"
+    path.parent.mkdir()
+    path.symlink_to(target)
+    _run(path)
+    assert target.read_text() == "keep me"
+    assert not path.is_symlink() and _messages(path)[0] is not None
+    assert [p.name for p in path.parent.iterdir()] == [path.name]  # no temporary file left
+
+
+def test_a_failed_write_leaves_no_partial_file_and_close_says_so(tmp_path, monkeypatch):
+    path = tmp_path / "rec.mcap"
+    path.write_bytes(b"the previous run's recording")
+    with pytest.raises(RecordingError, match=r"rec\.mcap not written: No space left"):
+        with RunRecorder(path) as recorder:
+            arm, cam = _devices(START)
+
+            def full(data):
+                raise OSError(28, "No space left on device")
+
+            monkeypatch.setattr(recorder._file, "write", full)
+            loop = PositioningLoop(arm, cam, LoopConfig(), None, lambda: truth_error(arm),
+                                   recorder=recorder)
+            assert loop.run(TruthEstimator(arm)) is not None  # the run itself goes on
+    assert path.read_bytes() == b"the previous run's recording"
+    assert [p.name for p in tmp_path.iterdir()] == ["rec.mcap"]
