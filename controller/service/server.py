@@ -31,7 +31,7 @@ from pathlib import Path
 
 from controller.service.config import ServiceConfig
 from controller.service.connection import Connection, RequestHandler
-from controller.service.listeners import bind_tcp, bind_unix, unlink_if_ours
+from controller.service.listeners import ListenerError, bind_tcp, bind_unix, unlink_if_ours
 from controller.service.pacing import RequestPacer
 from controller.service.peer import PeerPolicy, peer_credentials, resolve_gid
 from controller.service.protocol import (
@@ -104,9 +104,10 @@ class ControlServer:
         """Bind the UNIX socket (and the TCP listener if configured), start accepting; returns self.
 
         Raises:
-            ListenerError: the socket path is not a socket, or another service answers on it.
+            ListenerError: the socket path is not a socket, another service answers on it, or
+                the TCP port cannot be bound (in use): the socket file is removed again.
             ConfigError: ``service.socket_group`` names no group on this system.
-            OSError: a socket cannot be bound (e.g. the TCP port is in use).
+            OSError: the UNIX socket cannot be bound.
         """
         group = self.config.socket_group
         gid = resolve_gid(group, "service.socket_group") if group is not None else None
@@ -115,7 +116,14 @@ class ControlServer:
         logger.info("control socket %s (mode 0660, group %s)", self.socket_path,
                     group if group is not None else "of the service")
         if self.config.tcp is not None:
-            self._listeners[bind_tcp(self.config.tcp)] = "tcp"
+            try:
+                self._listeners[bind_tcp(self.config.tcp)] = "tcp"
+            except OSError as exc:  # e.g. another service on the port: leave no socket file
+                sock.close()
+                self._listeners.clear()
+                unlink_if_ours(self.socket_path, self._inode)
+                raise ListenerError(f"service.tcp: cannot listen on {self.config.tcp.host}:"
+                                    f"{self.config.tcp.port}: {exc.strerror or exc}") from exc
             logger.warning("TCP control listener on %s:%d (token required)",
                            self.config.tcp.host, self.config.tcp.port)
         self._wake_r, self._wake_w = os.pipe()

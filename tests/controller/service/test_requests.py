@@ -16,6 +16,7 @@ import pytest
 from controller.service.client import ServiceClient, ServiceError, ServiceUnavailable
 from controller.service.commands import COMMANDS
 from controller.service.listeners import read_token
+from controller.service.service import Service
 from drivers.core.errors import ConfigError
 from tests.controller.service.conftest import (
     EVENT_TIMEOUT_S,
@@ -230,3 +231,20 @@ def test_token_files_are_read_bounded_and_never_block(tmp_path, kind):
         path.chmod(0o600)
     with pytest.raises(ConfigError, match=expected):
         read_token(path)
+
+
+def test_a_second_service_on_the_same_tcp_port_leaves_no_socket_file(tmp_path, short_dir, fakes,
+                                                                      token_file):
+    from controller.service.listeners import ListenerError
+
+    port = free_port()
+    config = service_config(tmp_path, short_dir, service={
+        "tcp": {"port": port, "token_file": str(token_file)}})
+    second = service_config(tmp_path / "second", short_dir, service={
+        "socket_path": str(short_dir / "second.sock"),
+        "tcp": {"port": port, "token_file": str(token_file)}})
+    with running_service(config, device_opener(*fakes)):
+        with pytest.raises(ListenerError, match=f"service.tcp: cannot listen on 127.0.0.1:{port}"):
+            Service(second, opener=device_opener(FakeArm(), FakeCamera(),
+                                                 FakeWrenchSensor())).run()
+        assert not (short_dir / "second.sock").exists()
