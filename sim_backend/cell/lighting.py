@@ -11,14 +11,16 @@ from __future__ import annotations
 import math
 from dataclasses import dataclass
 
-from sim_backend.cell.scene_config import LightingConfig
+from sim_backend.cell.scene_config import LampConfig, LightingConfig
 
 
 @dataclass(frozen=True)
 class Light:
     """A fully specified light: coefficients, unit direction towards the lamp, colour, shadows.
 
-    shadow_strength 0 means no cast shadows.
+    shadow_strength 0 means no cast shadows. lamps: further lamps, each a Light of its own
+    with no ambient or specular share (the renderer shades each lamp in a pass of its own and
+    the passes add up).
     """
 
     ambient: float
@@ -27,6 +29,7 @@ class Light:
     direction: tuple[float, float, float]
     color: tuple[float, float, float]
     shadow_strength: float
+    lamps: tuple[Light, ...] = ()
 
     @property
     def casts_shadows(self) -> bool:
@@ -70,4 +73,27 @@ def resolve_light(config: LightingConfig) -> Light:
         direction=base.direction if config.direction is None else _unit(config.direction),
         color=base.color if config.color is None else config.color,
         shadow_strength=strength,
+        lamps=tuple(_lamp(lamp, shadows=config.shadows is not False) for lamp in config.lamps),
     )
+
+
+def _lamp(config: LampConfig, shadows: bool) -> Light:
+    """A further lamp as a Light of its own: its diffuse light only."""
+    return Light(ambient=0.0, diffuse=config.diffuse, specular=0.0,
+                 direction=_unit(config.direction), color=config.color,
+                 shadow_strength=config.shadow_strength if shadows else 0.0)
+
+
+def kelvin_rgb(kelvin: float) -> tuple[float, float, float]:
+    """The RGB colour (brightest channel 1) of a black body at ``kelvin`` (1,000-40,000 K), by
+    Tanner Helland's fit to the CIE 1964 colour matching functions: 2,700 K is a warm
+    incandescent lamp, 6,500 K daylight."""
+    t = min(max(kelvin, 1000.0), 40000.0) / 100.0
+    red = 255.0 if t <= 66 else 329.698727446 * (t - 60.0) ** -0.1332047592
+    green = (99.4708025861 * math.log(t) - 161.1195681661 if t <= 66
+             else 288.1221695283 * (t - 60.0) ** -0.0755148492)
+    blue = (255.0 if t >= 66 else 0.0 if t <= 19
+            else 138.5177312231 * math.log(t - 10.0) - 305.0447927307)
+    rgb = [min(max(c, 0.0), 255.0) for c in (red, green, blue)]
+    top = max(rgb)
+    return (rgb[0] / top, rgb[1] / top, rgb[2] / top)

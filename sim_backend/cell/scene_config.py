@@ -23,6 +23,7 @@ TableTexture = Literal["none", "wood", "checker", "noise"]
 LightPreset = Literal["good", "poor", "dim", "side"]
 
 _UNIT_RANGE = {"min": 0.0, "max": 1.0}
+MAX_EXTRA_LAMPS = 4  # each further lamp costs a render and a shadow map per frame
 
 
 @dataclass(frozen=True)
@@ -50,6 +51,34 @@ class TableConfig:
 
 
 @dataclass(frozen=True)
+class LampConfig:
+    """A further lamp beside the preset's: it adds its own diffuse light and casts its own
+    shadows (no ambient light of its own).
+
+    direction: towards the lamp (world frame, any length, must point up); diffuse: the
+    renderer's diffuse coefficient; color: the lamp's RGB colour; shadow_strength: how much of
+    this lamp's light a shadow takes away (1 = hard, black).
+    """
+
+    direction: tuple[float, float, float] = (0.0, 0.0, 1.0)
+    diffuse: float = field(default=0.5, metadata={"min": 0.0, "max": 2.0})
+    color: tuple[float, float, float] = field(default=(1.0, 1.0, 1.0),
+                                              metadata={"min": 0.0, "max": 2.0})
+    shadow_strength: float = field(default=0.5, metadata=_UNIT_RANGE)
+
+    def __post_init__(self) -> None:
+        _check_direction(self.direction)
+
+
+def _check_direction(direction: tuple[float, float, float]) -> None:
+    if math.hypot(*direction) < 1e-9:
+        raise ValueError(f"direction: must not be zero, got {list(direction)}")
+    if direction[2] <= 0.0:
+        raise ValueError("direction: points from the table towards the lamp and must "
+                         f"point upwards (z > 0), got {list(direction)}")
+
+
+@dataclass(frozen=True)
 class LightingConfig:
     """Light: a preset, with any of the explicit values overriding it.
 
@@ -58,7 +87,8 @@ class LightingConfig:
     ambient / diffuse / specular: the renderer's coefficients; direction: towards the lamp
     (world frame, any length, must point up); shadows: cast shadows on/off;
     shadow_strength: how much of the lamp's light a shadow takes away (1 = hard, black);
-    color: the lamp's RGB colour.
+    color: the lamp's RGB colour; lamps: further lamps, each with its own direction, light,
+    colour and shadows (``LampConfig``).
     """
 
     preset: LightPreset = "good"
@@ -70,14 +100,14 @@ class LightingConfig:
     shadow_strength: float | None = field(default=None, metadata=_UNIT_RANGE)
     color: tuple[float, float, float] | None = field(default=None,
                                                      metadata={"min": 0.0, "max": 2.0})
+    lamps: tuple[LampConfig, ...] = ()
 
     def __post_init__(self) -> None:
         if self.direction is not None:
-            if math.hypot(*self.direction) < 1e-9:
-                raise ValueError(f"direction: must not be zero, got {list(self.direction)}")
-            if self.direction[2] <= 0.0:
-                raise ValueError("direction: points from the table towards the lamp and must "
-                                 f"point upwards (z > 0), got {list(self.direction)}")
+            _check_direction(self.direction)
+        if len(self.lamps) > MAX_EXTRA_LAMPS:
+            raise ValueError(f"lamps: at most {MAX_EXTRA_LAMPS} further lamps, got "
+                             f"{len(self.lamps)}")
 
 
 @dataclass(frozen=True)

@@ -722,11 +722,13 @@ class SimCell:
             return cam
         return cam @ self._optics.geometry.render_in_camera()
 
-    def _render_samples(self) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    def _render_samples(self, light: Light | None = None
+                        ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """The pinhole render at ``pixel_samples`` x ``pixel_samples`` samples a pixel
-        (display-referred uint8 RGB, depth buffer, body ids): the delivered image's size, or
-        the wider one the lens's distortion is resampled from (``optics.LensGeometry``)."""
-        light = self.light
+        (display-referred uint8 RGB, depth buffer, body ids) shaded by ``light`` (default: the
+        cell's, without its further lamps): the delivered image's size, or the wider one the
+        lens's distortion is resampled from (``optics.LensGeometry``)."""
+        light = self.light if light is None else light
         if self._optics is None:
             width, height = hand_camera.WIDTH_PX, hand_camera.HEIGHT_PX
             projection = hand_camera.projection_matrix()
@@ -753,14 +755,13 @@ class SimCell:
 
         Each sample is shaded, its cast shadow included, before a pixel integrates the light
         of its samples (``optics.integrate_samples``): a pixel on the part's outline holds
-        the part's light and the table's, each as lit where it lies."""
+        the part's light and the table's, each as lit where it lies. Each further lamp of the
+        light is shaded and shadowed in a pass of its own, and the passes add up."""
         rgb, depth, seg = self._render_samples()
-        if self.light.casts_shadows:
-            cam = self._render_camera()
-            centre = self._shadow_centre(cam)
-            rays = None if self._optics is None else self._optics.geometry.sample_rays()
-            rgb = self._shadow_map.apply(rgb, depth, seg, cam, self.light, centre,
-                                         self._table_rgba, rays)
+        rgb = self._shadowed(rgb, depth, seg, self.light)
+        for lamp in self.light.lamps:
+            more = self._shadowed(self._render_samples(lamp)[0], depth, seg, lamp)
+            rgb = np.minimum(rgb.astype(np.uint16) + more, 255).astype(np.uint8)
         if self._optics is not None:
             return self._optics.process_light(
                 optics.integrate_samples(rgb, self.camera_model.pixel_samples), noisy)
@@ -769,6 +770,34 @@ class SimCell:
             noise = self._noise_rng.standard_normal(rgb.shape, dtype=np.float32) * std
             rgb = np.clip(rgb + noise + 0.5, 0, 255).astype(np.uint8)
         return np.ascontiguousarray(rgb)
+
+    def _shadowed(self, rgb: np.ndarray, depth: np.ndarray, seg: np.ndarray,
+                  light: Light) -> np.ndarray:
+        """A render's samples with the cast shadows of ``light`` shaded in."""
+        if not light.casts_shadows:
+            return rgb
+        cam = self._render_camera()
+        rays = None if self._optics is None else self._optics.geometry.sample_rays()
+        return self._shadow_map.apply(rgb, depth, seg, cam, light, self._shadow_centre(cam),
+                                      self._table_rgba, rays)
+
+    @property
+    def exposure_factor(self) -> float:
+        """The camera's exposure x gain now (1 for the ideal camera, which has none)."""
+        return 1.0 if self._optics is None else self._optics.factor
+
+    def visible_fraction(self) -> float:
+        """The share of the part's pixels the hand camera sees from where it is now, the
+        occluder in place against the occluder taken away (1 without an occluder)."""
+        if self._occluder is None:
+            return 1.0
+        seen = int((self.render_labels() == LABEL_PART).sum())
+        self._place_body(self._occluder.body_id, _translation(0.0, 0.0, -5000.0))
+        try:
+            whole = int((self.render_labels() == LABEL_PART).sum())
+        finally:
+            self._set_part_pose(self._part_pose)
+        return 1.0 if whole == 0 else min(1.0, seen / whole)
 
     @staticmethod
     def _shadow_centre(cam: np.ndarray) -> np.ndarray:

@@ -254,6 +254,29 @@ def test_occluder_hides_the_given_share_of_the_part():
     assert visible[0.0] > visible[0.3] > visible[0.6] > 0
 
 
+def test_visible_fraction_measures_what_the_card_hides():
+    with SimCell(_scene(occluder={"enabled": True, "coverage": 0.3}), seed=1) as c:
+        part_before = c.object_pose()
+        hidden = c.visible_fraction()
+        assert 0.4 < hidden < 0.85
+        assert c.object_pose() == part_before  # the card is back on the part
+        assert (c.render_labels() == LABEL_OCCLUDER).sum() > 0
+        assert c.visible_fraction() == pytest.approx(hidden)
+    with SimCell(_scene(), seed=1) as c:
+        assert c.visible_fraction() == 1.0
+
+
+def test_a_further_lamp_adds_its_light_and_a_dark_one_nothing():
+    images = {}
+    for name, lamps in (("none", []), ("dark", [{"diffuse": 0.0}]),
+                        ("lit", [{"direction": [-1, 0, 1], "diffuse": 0.5,
+                                  "shadow_strength": 0.8}])):
+        with SimCell(_scene(lighting={"preset": "dim", "lamps": lamps}), seed=2) as c:
+            images[name] = c.render(noisy=False).astype(float)
+    assert np.array_equal(images["none"], images["dark"])
+    assert images["lit"].mean() > images["none"].mean() + 10
+
+
 @pytest.mark.parametrize("kind", ["cube", "nut", "ledge", "screw"])
 def test_the_card_rests_on_the_part_and_the_table_and_hides_its_share_in_view(kind):
     """A quarter card leans from the part's end to the table (it touches both, and nothing

@@ -9,7 +9,7 @@ import pytest
 from drivers.core.errors import ConfigError
 from drivers.core.parts import PARTS
 from drivers.core.typed_config import from_mapping
-from sim_backend.cell.lighting import PRESETS, resolve_light
+from sim_backend.cell.lighting import PRESETS, kelvin_rgb, resolve_light
 from sim_backend.cell.scene_config import (
     LightingConfig,
     PartKind,
@@ -63,6 +63,9 @@ def test_load_scene_ignores_other_sections_and_missing_scene(tmp_path):
     ({"clutter": {"count": 2.5}}, "scene.clutter.count: expected a whole number"),
     ({"clutter": {"count": 20}}, "scene.clutter.count: must be <= 8"),
     ({"lights": {}}, "scene.lights: unknown key"),
+    ({"lighting": {"lamps": [{"direction": [1, 0, -1]}]}}, "scene.lighting.lamps[0]: "),
+    ({"lighting": {"lamps": [{"diffuse": 3}]}}, "scene.lighting.lamps[0].diffuse: must be"),
+    ({"lighting": {"lamps": [{}] * 5}}, "scene.lighting: lamps: at most 4"),
 ])
 def test_bad_scene_values_fail_with_the_key_path(data, message):
     with pytest.raises(ConfigError) as err:
@@ -95,3 +98,24 @@ def test_explicit_light_values_override_the_preset():
     assert light.diffuse == PRESETS["side"].diffuse
     assert not resolve_light(LightingConfig(shadows=False)).casts_shadows
     assert resolve_light(LightingConfig(preset="poor")).shadow_strength > 0.9
+
+
+def test_further_lamps_resolve_to_lights_of_their_own():
+    config = from_mapping(SceneConfig, {"lighting": {"preset": "poor", "lamps": [
+        {"direction": [0, 2, 2], "diffuse": 0.4, "color": [1, 0.9, 0.8],
+         "shadow_strength": 0.7}]}}, "scene")
+    light = resolve_light(config.lighting)
+    (lamp,) = light.lamps
+    assert lamp.ambient == 0.0 and lamp.specular == 0.0 and lamp.diffuse == 0.4
+    assert lamp.direction == pytest.approx((0.0, 2 ** -0.5, 2 ** -0.5))
+    assert lamp.shadow_strength == 0.7 and light.ambient == PRESETS["poor"].ambient
+    no_shadows = resolve_light(type(config.lighting)(lamps=config.lighting.lamps,
+                                                     shadows=False))
+    assert no_shadows.lamps[0].shadow_strength == 0.0
+
+
+def test_colour_temperature_runs_from_warm_to_daylight():
+    warm, day = kelvin_rgb(2700), kelvin_rgb(6500)
+    assert warm[0] == 1.0 and warm[0] > warm[1] > warm[2] > 0.2
+    assert min(day) > 0.95
+    assert kelvin_rgb(4000)[2] > warm[2]
