@@ -119,7 +119,9 @@ def main(argv: list[str] | None = None) -> int:
         arguments make argparse exit with 2.
     """
     parser = build_parser()
+    argv = sys.argv[1:] if argv is None else list(argv)
     args = parser.parse_args(argv)
+    args.command_line = ["finepos", *argv]  # reports quote the command that made them
     setup_logging(args.verbose)
     previous = _terminate_on_sigterm()
     try:

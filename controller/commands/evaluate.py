@@ -47,12 +47,27 @@ Also: finepos evaluate --mounts 10 --trials 50 --json out/mounts.json
 of view +/-15 %, k1 in [-0.35, 0.1], vignetting, blur, gamma and auto-exposure varied; the rest
 as scene.camera), each taught, trained and tested on its own cell; one row per camera and a
 summary (worst and median camera). The method never sees a camera parameter.
+
+Also: finepos evaluate --randomize --trials 500 --workers 2 --seed 1 --json out/random.json
+
+--randomize: the yardstick, randomized cells. Every --trials-per-cell trials share one drawn
+cell: a camera (output gamma 1.0-2.4, auto-exposure on or off, a fixed exposure set within
+0.7-1.4 times what auto-exposure settles on in the training light, gain cap, read noise, 1-3
+samples a pixel, JPEG quality 60-100 or none, Bayer on or off; mount and lens as --mounts
+draws them), a table (colour, texture, brightness) and the part's colour; it is taught,
+acquired and trained under a drawn light. Each trial draws the light afresh (1-3 lamps at
+random directions and heights, brightness from dim to bright, colour temperature 2,700-6,500
+K, shadow strength), a card over 0-30% of the part and 0-3 other parts on the table. The
+report records every draw and gives the yardstick's figures (safe within 2.5 loops and RMS
+where at least 80% of the part is visible; stops where at least 85% is), its targets, and
+the results by each drawn factor. --workers runs the cells in parallel processes.
 """
 
 from __future__ import annotations
 
 import argparse
 import json
+import shlex
 import sys
 
 from controller.commands.common import (
@@ -68,12 +83,20 @@ from controller.commands.common import (
 )
 from controller.evaluation.mounts import evaluate_mounts
 from controller.evaluation.parts_table import parts_markdown, run_parts_table
+from controller.evaluation.randomized import TRIALS_PER_CELL, evaluate_randomized
 from controller.evaluation.trials import evaluate
 from controller.fine_positioner import REZERO_SYSTEMS
 from controller.loop.iteration_log import IterationLog
 from drivers.core import parts
 from drivers.core.errors import ConfigError
 from drivers.core.files import atomic_write_text, write_json
+
+
+def command_of(args) -> str | None:
+    """The command line that ran, as a shell would take it (None when not run from
+    ``controller.cli.main``)."""
+    line = getattr(args, "command_line", None)
+    return None if line is None else shlex.join(line)
 
 
 def run(args) -> int:
@@ -96,8 +119,12 @@ def run(args) -> int:
                           "scene's light)")
     if args.part == ALL_PARTS:
         return _evaluate_parts(args, config)
+    if args.randomize:
+        return _evaluate_randomized(args, config)
+    if args.trials_per_cell is not None:
+        raise ConfigError("--trials-per-cell: only with --randomize")
     if args.workers != 1:
-        raise ConfigError("--workers: only with --part all")
+        raise ConfigError("--workers: only with --part all or --randomize")
     if args.mounts is not None:
         return _evaluate_mounts(args, config)
     log = IterationLog(args.log) if args.log else None
@@ -112,6 +139,7 @@ def run(args) -> int:
     finally:
         if log:
             log.close()
+    report["command"] = command_of(args)
     trial_states = report.pop("_trial_states")
     if args.states:
         atomic_write_text(args.states, json.dumps(trial_states))
@@ -134,10 +162,30 @@ def _evaluate_parts(args, config) -> int:
                              progress=not args.quiet, rezero=args.rezero,
                              teach_lighting=args.teach_lighting,
                              rezero_heading_step=args.rezero_heading_step)
+    report["command"] = command_of(args)
     if args.json:
         atomic_write_text(args.json, json.dumps(report, indent=2) + "\n")
         print(f"report: {args.json}", file=sys.stderr)
     print(parts_markdown(report), end="")
+    return 0
+
+
+def _evaluate_randomized(args, config) -> int:
+    """``--randomize``: ``randomized.evaluate_randomized`` with the options; prints the JSON
+    report."""
+    for option in ("model", "log", "states", "record", "mounts", "lighting", "teach_lighting"):
+        if getattr(args, option, None) is not None:
+            raise ConfigError(f"--{option.replace('_', '-')}: not with --randomize (every cell "
+                              "and its light are drawn)")
+    for flag in ("hil", "rezero"):
+        if getattr(args, flag):
+            raise ConfigError(f"--{flag}: not with --randomize")
+    report = evaluate_randomized(args.system, config, trials=args.trials, seed=args.seed,
+                                 trials_per_cell=args.trials_per_cell or TRIALS_PER_CELL,
+                                 grasp=not args.no_grasp, workers=args.workers,
+                                 progress=not args.quiet)
+    report["command"] = command_of(args)
+    write_json(args.json, report)
     return 0
 
 
@@ -150,6 +198,7 @@ def _evaluate_mounts(args, config) -> int:
     report = evaluate_mounts(args.system, config, mounts=args.mounts, trials=args.trials,
                              seed=args.seed, lighting=args.lighting, grasp=not args.no_grasp,
                              progress=not args.quiet, hil=args.hil)
+    report["command"] = command_of(args)
     write_json(args.json, report)
     return 0
 
@@ -189,9 +238,15 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                         help="with --rezero: also the zero by heading, the part turned by "
                              "the arm in steps of at most DEG (finepos rezero --heading-step; "
                              "gabor)")
+    parser.add_argument("--randomize", action="store_true",
+                        help="randomized cells: camera, light, table, part colour, card and "
+                             "clutter drawn (see above)")
+    parser.add_argument("--trials-per-cell", type=positive_int, metavar="N",
+                        help=f"--randomize: trials that share one drawn, trained cell "
+                             f"(default {TRIALS_PER_CELL})")
     parser.add_argument("--quiet", action="store_true", help="no progress bars")
     parser.add_argument("--workers", type=positive_int, default=1,
-                        help="--part all: parallel processes for the trials (default 1)")
+                        help="--part all or --randomize: parallel processes (default 1)")
     add_timing_option(parser)
     parser.add_argument("--hil", action="store_true",
                         help="through the real drivers and the device emulators (see above)")

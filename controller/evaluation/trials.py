@@ -89,7 +89,16 @@ def train_systems_on_default_scene(systems: Sequence[str], config, work_dir: Pat
     through the real drivers (module docstring); ``lighting``: the default scene under this
     lighting preset (a cell taught in the light it works in; None: the default scene's).
     """
-    train_cfg = with_lighting(default_scene_config(config), lighting)
+    return train_systems_on_cell(systems, with_lighting(default_scene_config(config), lighting),
+                                 work_dir, seed, progress, hil)
+
+
+def train_systems_on_cell(systems: Sequence[str], train_cfg, work_dir: Path, seed: int,
+                          progress: bool = True, hil: bool = False
+                          ) -> tuple[dict[str, TrainedModel], dict]:
+    """Teach (auto) and acquire the NN1 and NN2 grids once on ``train_cfg``'s cell as it is,
+    then train every system on them (``train_systems_on_default_scene`` says what it
+    returns)."""
     with device_opener(hil)(train_cfg, seed=seed) as devices:
         fp = FinePositioner(devices, train_cfg, state_dir=work_dir)
         fp.teach_auto()
@@ -128,13 +137,14 @@ def rezeroed_on(model: TrainedModel, config, work_dir: Path, seed: int, hil: boo
 def run_trials(system: str, model: TrainedModel, config, trials: int, seed: int, *,
                work_dir: Path, grasp: bool = True, log=None, progress: bool = True,
                budget: float = EVAL_BUDGET, on_trial: Callable[[], None] | None = None,
-               hil: bool = False, recorder=None) -> dict:
+               hil: bool = False, recorder=None, measure_visible: bool = False) -> dict:
     """Random placements and start offsets; returns per-trial states and grasp outcomes.
 
     ``on_trial`` is called after each trial (progress reporting from another process);
     ``hil``: through the real drivers (see the module docstring); ``recorder``: records the
     looks and grasps (``controller.recording.RunRecorder``; its ``max_runs`` picks the first
-    trials).
+    trials); ``measure_visible``: the arm first goes to each placement's pre-grasp pose, where
+    the share of the part the camera sees is measured (``visible``, one per trial).
     """
     rng = np.random.default_rng(seed)
     states, grasps, per_iteration, outcomes = [], [], [], []
@@ -151,6 +161,7 @@ def run_trials(system: str, model: TrainedModel, config, trials: int, seed: int,
         kappa = cell.kappa
         period = 360.0 / kappa
         turns = []  # each trial's part turned from its taught heading
+        visible = []  # with measure_visible: the share of the part seen at its pre-grasp pose
         for _ in tqdm(range(trials), desc=f"evaluate {system}", unit="trial",
                       disable=None if progress else True, leave=False):
             devices.arm.open_gripper()
@@ -160,6 +171,9 @@ def run_trials(system: str, model: TrainedModel, config, trials: int, seed: int,
             cell.place_object(x, y, heading)
             turns.append((heading - taught_heading) % period)
             nominal = cell.nominal_grasp_pose()
+            if measure_visible:
+                fp.move_to(nominal)
+                visible.append(cell.visible_fraction())
             dx, dy = rng.uniform(-OFFSET_MM, OFFSET_MM, 2)
             dphi = rng.uniform(-period / 2, period / 2)
             fp.move_to(nominal.moved_in_tool_frame(ToolStep(-dx, -dy, 0.0, -dphi)))
@@ -189,7 +203,8 @@ def run_trials(system: str, model: TrainedModel, config, trials: int, seed: int,
     return {"states": states, "grasps": grasps, "seconds_per_iteration": per_iteration,
             "outcomes": outcomes, "object": cell_kind(config), "kappa": kappa, "turns": turns,
             "state_times": state_times, "grasp_times": grasp_times,
-            "timing": config.scene.timing, "time_split": splits}
+            "timing": config.scene.timing, "time_split": splits,
+            "visible": visible if measure_visible else None}
 
 
 def _split(timing) -> tuple[float, float] | None:
