@@ -104,6 +104,11 @@ def add_system_option(parser: argparse.ArgumentParser) -> None:
 TAUGHT_PART_HELP = "the one part taught, else the cell's: controller.part or the simulated table's"
 
 
+def state_root(args, config) -> str:
+    """The state folder: ``--state-dir``, else ``controller.paths.state_dir``."""
+    return getattr(args, "state_dir", None) or config.controller.paths.state_dir
+
+
 def part_setup(args, config, *, teach: bool = False):
     """The config set up for the command's part, and that part's state folder.
 
@@ -119,8 +124,7 @@ def part_setup(args, config, *, teach: bool = False):
         ConfigError: several parts are taught and none is named.
     """
     default = cell_part(config)
-    folder = StateFolder(getattr(args, "state_dir", None) or config.controller.paths.state_dir,
-                         default)
+    folder = StateFolder(state_root(args, config), default)
     requested = getattr(args, "part", None)
     kind = (requested or default) if teach else folder.resolve(requested, default)
     return with_part(config, kind), folder.part_dir(kind)

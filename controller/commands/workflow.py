@@ -2,10 +2,13 @@
 step.
 
 Each works on one part (``--part``, see ``common.part_setup``), in that part's folder under the
-state folder (``controller.teach.state_folder``).
+state folder (``controller.teach.state_folder``), which it locks for its run against a service
+or another of them (``controller.teach.state_lock``).
 """
 
 from __future__ import annotations
+
+import contextlib
 
 from calibration_free.rezero import MAX_SHIFT_MM, MAX_TURN_DEG, NN2_MIN_DEG
 from controller.commands.common import (
@@ -23,11 +26,13 @@ from controller.commands.common import (
     part_setup,
     positive_float,
     run_recorder,
+    state_root,
 )
 from controller.commands.device_options import add_device_options, apply_device_options
 from controller.devices import open_devices
 from controller.fine_positioner import DATASETS, REZERO_FRAMES, REZERO_SYSTEMS, FinePositioner
 from controller.teach.spacenav import DEFAULT_SIM_START_OFFSET, TeachAborted, teach_with_spacenav
+from controller.teach.state_lock import locked_state_folder
 from drivers.core.errors import ConfigError
 from drivers.core.files import write_json
 from drivers.core.pose import ToolStep
@@ -35,22 +40,32 @@ from drivers.core.pose import ToolStep
 _SPACENAV_ONLY = ("start_offset", "spnav_socket", "timeout_s")
 
 
-def _config(args, teach: bool = False):
-    """The config file's settings with the command line's device options applied, set up for
-    the command's part, and that part's state folder (``common.part_setup``)."""
-    return part_setup(args, apply_device_options(config_from_args(args), args), teach=teach)
+@contextlib.contextmanager
+def _locked_setup(args, command: str, *, teach: bool = False, devices: bool = True):
+    """The config file's settings (with the command line's device options applied, unless not
+    ``devices``) set up for the command's part, and that part's state folder
+    (``common.part_setup``), with the state folder locked against other writers for the block.
+
+    Raises:
+        StateFolderLocked: a service or another writer holds the state folder (exit status 2).
+    """
+    config = config_from_args(args)
+    if devices:
+        config = apply_device_options(config, args)
+    with locked_state_folder(state_root(args, config), f"finepos {command}"):
+        yield part_setup(args, config, teach=teach)
 
 
 def cmd_teach(args) -> int:
     """Record the nominal pose (auto, spacenav or current); 1 when a spacenav teach-in aborts."""
-    config, state_dir = _config(args, teach=True)
     given = [f"--{name.replace('_', '-')}" for name in _SPACENAV_ONLY
              if getattr(args, name) is not None]
     if given and args.device != "spacenav":
         raise ConfigError(f"{given[0]}: only with --device spacenav")
     start_offset = parse_triple(args.start_offset, "--start-offset") if args.start_offset \
         else None
-    with open_devices(config) as devices:
+    with _locked_setup(args, "teach", teach=True) as (config, state_dir), \
+            open_devices(config) as devices:
         fp = FinePositioner(devices, config, state_dir=state_dir)
         if args.auto:
             state = fp.teach_auto()
@@ -75,8 +90,7 @@ def cmd_teach(args) -> int:
 
 def cmd_acquire(args) -> int:
     """Take the ``--set`` dataset around the taught pose and print where it is stored."""
-    config, state_dir = _config(args)
-    with open_devices(config) as devices:
+    with _locked_setup(args, "acquire") as (config, state_dir), open_devices(config) as devices:
         fp = FinePositioner(devices, config, state_dir=state_dir)
         data = fp.acquire(args.set, seed=args.seed)
     write_json(None, {"part": config.controller.part, "set": args.set, "images": len(data),
@@ -87,9 +101,9 @@ def cmd_acquire(args) -> int:
 
 def cmd_train(args) -> int:
     """Train ``--system`` from the nn1 and nn2 datasets and print the model file."""
-    config, state_dir = part_setup(args, config_from_args(args))
-    fp = FinePositioner(None, config, state_dir=state_dir)
-    model = fp.train(args.system)
+    with _locked_setup(args, "train", devices=False) as (config, state_dir):
+        fp = FinePositioner(None, config, state_dir=state_dir)
+        model = fp.train(args.system)
     write_json(None, {"part": config.controller.part, "system": args.system,
                       "model": str(fp.model_path(args.system)),
                       "train_images": model.train_images,
@@ -102,8 +116,7 @@ def cmd_rezero(args) -> int:
     cell's light; print what moved."""
     if args.heading_range and args.heading_step is None:
         raise ConfigError("--heading-range: only with --heading-step")
-    config, state_dir = _config(args)
-    with open_devices(config) as devices:
+    with _locked_setup(args, "rezero") as (config, state_dir), open_devices(config) as devices:
         fp = FinePositioner(devices, config, state_dir=state_dir)
         _, report = fp.rezero(args.frames, args.system, args.heading_step,
                               tuple(args.heading_range) if args.heading_range else None)
@@ -117,9 +130,9 @@ def cmd_position(args) -> int:
 
     The model is loaded before the iteration log and the recording are created: a run that
     cannot start leaves no files."""
-    config, state_dir = _config(args)
     offset = parse_triple(args.offset, "--offset") if args.offset is not None else None
-    with open_devices(config) as devices:
+    with _locked_setup(args, "position") as (config, state_dir), \
+            open_devices(config) as devices:
         fp = FinePositioner(devices, config, state_dir=state_dir)
         fp.load_model(args.model, args.system)
         with iteration_log(args, config) as log, run_recorder(args) as recorder:
@@ -154,8 +167,8 @@ def _position_run(args, fp: FinePositioner, offset) -> dict:
 
 def cmd_grasp(args) -> int:
     """Run the force-guarded grasp from the current pose; 1 when it failed."""
-    config, state_dir = _config(args)
-    with open_devices(config) as devices, run_recorder(args) as recorder:
+    with _locked_setup(args, "grasp") as (config, state_dir), open_devices(config) as devices, \
+            run_recorder(args) as recorder:
         fp = FinePositioner(devices, config, state_dir=state_dir, recorder=recorder)
         result = fp.grasp()
     write_json(None, {"part": config.controller.part, **result.as_dict()})

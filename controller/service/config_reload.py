@@ -1,10 +1,11 @@
 """What a config reload (SIGHUP) may change while the service runs, and what needs a restart.
 
 Live: ``safety`` (the arm's limits), ``perception``, ``controller`` (except the log folder, whose
-file is open), and in ``service`` the allowed peers, the idle poll, the reconnection backoff and
-the stall and stop timeouts. Everything else is fixed by what is open: the devices (``arm``,
-``camera``, ``wrench``, and ``scene`` for the simulated cell), the log folder and the listeners.
-A reload that changes any of those is refused as a whole.
+file is open, and the state folder, whose lock is held), and in ``service`` the allowed peers,
+the idle poll, the reconnection backoff and the stall and stop timeouts. Everything else is
+fixed by what is open: the devices (``arm``, ``camera``, ``wrench``, and ``scene`` for the
+simulated cell), the log and state folders and the listeners. A reload that changes any of those
+is refused as a whole.
 """
 
 from __future__ import annotations
@@ -20,6 +21,6 @@ def restart_only_changes(old, new) -> list[str]:
     changed = [name for name in RESTART_SECTIONS if getattr(old, name) != getattr(new, name)]
     changed += [f"service.{key}" for key in RESTART_SERVICE_KEYS
                 if getattr(old.service, key) != getattr(new.service, key)]
-    if old.controller.paths.log_dir != new.controller.paths.log_dir:
-        changed.append("controller.paths.log_dir")
+    changed += [f"controller.paths.{key}" for key in ("log_dir", "state_dir")
+                if getattr(old.controller.paths, key) != getattr(new.controller.paths, key)]
     return changed

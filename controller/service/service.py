@@ -57,6 +57,7 @@ from controller.service.snapshot import StatusSnapshot
 from controller.service.states import JOB_STATES, State, StateMachine
 from controller.service.watchdog import WatchdogPinger
 from controller.teach.state_folder import StateFolder
+from controller.teach.state_lock import locked_state_folder
 from drivers.core.errors import ConfigError, FineposError
 from drivers.core.files import has_room, remove_stale_temp_files
 from drivers.core.typed_config import to_mapping
@@ -131,9 +132,13 @@ class Service:
         policy = PeerPolicy.from_config(cfg.service.allowed_users, cfg.service.allowed_groups)
         token = read_token(cfg.service.tcp.token_file) if cfg.service.tcp is not None else None
         log_path = Path(cfg.controller.paths.log_dir) / ITERATION_LOG_NAME
-        self._remove_stale_temp_files()
-        self._next_job_id = _first_free_job_id(cfg.service.record_dir)
         with contextlib.ExitStack() as stack:
+            # before anything is written: a second service or a CLI writer on this state
+            # folder is refused, naming this process
+            stack.enter_context(locked_state_folder(
+                cfg.controller.paths.state_dir, f"finepos serve on {self.socket_path}"))
+            self._remove_stale_temp_files()
+            self._next_job_id = _first_free_job_id(cfg.service.record_dir)
             self._log = stack.enter_context(IterationLog(log_path))
             self._log.subscribe(self._on_record)
             logger.info("iteration records go to %s", log_path)
@@ -566,7 +571,7 @@ class Service:
         if port is None:
             return None
         from controller.recording.live import LiveView
-        from sim_backend.emulators.mjpeg.server import MjpegServer
+        from drivers.camera.mjpeg_server import MjpegServer
 
         live = LiveView()
         server = stack.enter_context(MjpegServer(live, port=port))
