@@ -1,9 +1,9 @@
 """Live view: the latest look's hand-camera frame with its overlay, as a camera-like source.
 
 ``LiveView`` is a look recorder (the positioning loop's ``recorder`` hook) and has the one
-method an MJPEG server needs from a camera, ``grab()``; serve it on loopback with the existing
-camera-stream server (``sim_backend.emulators.mjpeg.server.MjpegServer(live_view, port)``),
-for a browser on the cell's PC. ``Tee`` hands each look to several recorders (a recording and
+method an MJPEG server needs from a camera, ``grab()``; serve it on loopback with the camera
+stream server (``drivers.camera.mjpeg_server.MjpegServer(live_view, port)``), for a browser on
+the cell's PC. ``Tee`` hands each look to several recorders (a recording and
 the live view). Off unless a caller builds one (service key ``service.live_view_port``).
 """
 

@@ -22,13 +22,13 @@ import logging
 import threading
 from typing import Any, Self
 
+from drivers.camera.mjpeg_server import MjpegServer
+from drivers.core.lifecycle import Lifecycle
 from drivers.core.timing import TimingConfig
 from sim_backend.cell.sim_cell import SimCell
 from sim_backend.cell.timing import CellTiming, cell_timing
 from sim_backend.devices import SimArm, SimCamera, SimWrenchSensor
 from sim_backend.emulators.ati.emulator import AtiEmulator
-from sim_backend.emulators.lifecycle import Lifecycle
-from sim_backend.emulators.mjpeg.server import MjpegServer
 from sim_backend.emulators.val.server import ValEmulator, ValFaults
 from sim_backend.emulators.val.sim_arm import SIM_KINEMATICS
 

@@ -24,8 +24,8 @@ import time
 from abc import abstractmethod
 from collections.abc import Callable
 
+from drivers.core.lifecycle import ThreadedServer
 from sim_backend.emulators.endpoints import PtyEndpoint, TcpEndpoint
-from sim_backend.emulators.lifecycle import ThreadedServer
 
 logger = logging.getLogger(__name__)
 

@@ -12,6 +12,7 @@ import pytest
 from drivers.camera import OpenCvCamera, OpenCvCameraConfig
 from drivers.camera.drop_counter import DropCounter
 from drivers.camera.frame_reader import to_rgb
+from drivers.camera.mjpeg_server import MjpegServer
 from drivers.contract import check_camera
 from drivers.core.errors import (
     ConfigError,
@@ -24,7 +25,6 @@ from drivers.interfaces import Lifecycle
 from sim_backend.cell.scene_config import SceneConfig
 from sim_backend.cell.sim_cell import SimCell
 from sim_backend.devices import SimCamera
-from sim_backend.emulators.mjpeg.server import MjpegServer
 from tests.mocks.fakes import FakeCamera
 
 LARGE_RGB = (30, 120, 220)

@@ -21,7 +21,7 @@ from pathlib import Path
 from typing import Self
 
 from drivers.core.errors import DeviceNotConnectedError, DeviceTimeoutError
-from sim_backend.emulators.lifecycle import Lifecycle
+from drivers.core.lifecycle import Lifecycle
 
 logger = logging.getLogger(__name__)
 

@@ -18,8 +18,8 @@ import time
 import numpy as np
 
 from drivers.camera import OpenCvCamera, OpenCvCameraConfig
+from drivers.camera.mjpeg_server import MjpegServer
 from drivers.interfaces import Camera, Frame
-from sim_backend.emulators.mjpeg.server import MjpegServer
 
 
 class _MovingBars(Camera):

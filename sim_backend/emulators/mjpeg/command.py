@@ -19,9 +19,9 @@ import contextlib
 from pathlib import Path
 
 from drivers.camera import OpenCvCamera, OpenCvCameraConfig
+from drivers.camera.mjpeg_server import MjpegServer
 from drivers.interfaces import Camera
 from sim_backend.cell.timing import add_timing_argument, cell_timing, timing_from_args
-from sim_backend.emulators.mjpeg.server import MjpegServer
 from sim_backend.emulators.val.command import wait_for_stop_signal
 
 

@@ -1,4 +1,4 @@
-"""Live view: the annotated latest look, served by the existing MJPEG camera-stream server."""
+"""Live view: the annotated latest look, served by the MJPEG camera-stream server."""
 
 import urllib.request
 
@@ -8,8 +8,8 @@ import numpy as np
 from controller.loop.positioning import LoopConfig, PositioningLoop
 from controller.recording.live import LiveView, Tee
 from controller.recording.writer import RunRecorder
+from drivers.camera.mjpeg_server import MjpegServer
 from drivers.core.pose import ToolStep
-from sim_backend.emulators.mjpeg.server import MjpegServer
 from tests.controller.loop.loop_fixtures import NOMINAL, TruthEstimator
 from tests.mocks.fakes import FakeArm, FakeCamera
 

@@ -16,12 +16,12 @@ from controller.devices import open_devices
 from controller.loop.iteration_log import read_log
 from controller.service.client import ServiceError
 from controller.service.sd_notify import Notifier
+from drivers.camera.mjpeg_server import MjpegServer
 from drivers.core.pose import ToolStep
 from drivers.interfaces import Wrench
 from drivers.safety import SafetyLimits
 from drivers.val import ValArm, ValConfig
 from sim_backend.emulators.ati.emulator import AtiEmulator
-from sim_backend.emulators.mjpeg.server import MjpegServer
 from sim_backend.emulators.val.server import DEFAULT_GARBAGE, ValEmulator, ValFaults
 from tests.controller.service.conftest import (
     EVENT_TIMEOUT_S,

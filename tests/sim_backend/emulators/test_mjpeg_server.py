@@ -12,7 +12,7 @@ import cv2
 import numpy as np
 import pytest
 
-from sim_backend.emulators.mjpeg.server import BOUNDARY, MjpegServer
+from drivers.camera.mjpeg_server import BOUNDARY, MjpegServer
 from tests.mocks.fakes import FakeCamera
 
 COLOUR_RGB = (200, 60, 20)

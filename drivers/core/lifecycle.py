@@ -1,4 +1,4 @@
-"""How every emulator and helper process starts and stops: ``start()`` / ``close()``.
+"""How every server, emulator and helper process starts and stops: ``start()`` / ``close()``.
 
 ``Lifecycle`` is the verb pair: ``start()`` returns the started object, ``close()`` is idempotent,
 and ``with obj:`` starts it and closes it on leaving the block. ``ThreadedServer`` is a lifecycle

@@ -1,5 +1,10 @@
 """An MJPEG-over-HTTP server on 127.0.0.1 serving the frames of any Camera, as network cameras do.
 
+The wire format the OpenCV camera driver reads (``drivers.camera.driver``), written once here:
+the service's live view (``controller.recording.live``, ``service.live_view_port``) serves its
+annotated looks with it, and the camera emulator (``finepos sim camera-stream``,
+``sim_backend.emulators.mjpeg``) serves the simulated hand camera with it.
+
 Routes:
 
 - ``/stream.mjpg``: ``multipart/x-mixed-replace; boundary=...``, one JPEG part per frame
@@ -12,10 +17,11 @@ least one stream client is connected and shares each encoded frame with all of t
 camera (e.g. the simulated hand camera) is never used from two threads at once. The caller owns
 the camera's lifecycle (connect it first).
 
-Fault knobs: ``paused`` (an Event): while set, streams get no frames (connections stay open), as
-with a network camera that hangs; ``set_gone(True)``: the camera is gone (unplugged, rebooting):
-open streams end at once and every request is answered 503 until ``set_gone(False)``;
-``refused`` counts the streams ended and requests refused that way.
+The source's states, the emulator's fault knobs: ``paused`` (an Event): while set, streams get
+no frames (connections stay open), as with a network camera that hangs; ``set_gone(True)``: the
+camera is gone (unplugged, rebooting): open streams end at once and every request is answered
+503 until ``set_gone(False)``; ``refused`` counts the streams ended and requests refused that
+way.
 """
 
 from __future__ import annotations
@@ -31,8 +37,8 @@ from typing import Literal
 import cv2
 
 from drivers.core.errors import FineposError
+from drivers.core.lifecycle import ThreadedServer
 from drivers.interfaces import Camera
-from sim_backend.emulators.lifecycle import ThreadedServer
 
 logger = logging.getLogger(__name__)
 
