@@ -99,6 +99,11 @@ NN2_WIDEN_COPIES = 4
 WIDEN_MIN_KAPPA = 6
 # A blob covering more of the image than this is the background, not the object.
 MAX_OBJECT_FRACTION = 0.5
+# At the taught pose the part lies between the fingers, which the hand camera looks at: its
+# blob's centre lies within this fraction of the image's shorter side from the image's middle,
+# and it has at least MIN_TAUGHT_BLOB_PX pixels.
+CENTRE_RADIUS = 0.3
+MIN_TAUGHT_BLOB_PX = 50
 # Margin added to the relative half-range of the training areas (see prepare_training).
 AREA_MARGIN = 0.2
 # Factor on the most elongated training blob: the largest elongation still taken for the part.
@@ -202,7 +207,55 @@ def _otsu(images: list[np.ndarray]) -> tuple[float, float]:
     return threshold, float(between / max(values.var(), 1e-12))
 
 
-def prepare_training(sets: dict[str, Dataset], polarity: Polarity = "bright",
+def _taught_frames(sets: dict[str, Dataset]) -> list[tuple[str, int]]:
+    """(set, index) of the frames taken at the taught pose, or of every NN2 frame (the
+    smallest displacements) where none was."""
+    frames = [(name, int(i)) for name, data in sets.items()
+              for i in np.flatnonzero(at_taught_pose(data.labels))]
+    if frames or "nn2" not in sets:
+        return frames
+    return [("nn2", i) for i in range(len(sets["nn2"].images))]
+
+
+def _part_at_centre(mask: np.ndarray) -> bool:
+    """Whether a binary mask holds the part where teach-in put it: a blob within
+    ``CENTRE_RADIUS`` of the image's middle (the hand camera looks between the fingers),
+    clear of the image's border and smaller than ``MAX_OBJECT_FRACTION`` of the image."""
+    height, width = mask.shape
+    count, labels, stats, centroids = cv2.connectedComponentsWithStats(mask, connectivity=8)
+    centre = np.array([(width - 1) / 2.0, (height - 1) / 2.0])
+    reach = CENTRE_RADIUS * min(height, width)
+    for k in range(1, count):
+        x, y, w, h, area = stats[k]
+        if area < MIN_TAUGHT_BLOB_PX or area > MAX_OBJECT_FRACTION * height * width:
+            continue
+        if x == 0 or y == 0 or x + w == width or y + h == height:
+            continue
+        if np.hypot(*(centroids[k] - centre)) <= reach:
+            return True
+    return False
+
+
+def _channel_and_polarity(candidates: dict, otsu: dict, sets: dict[str, Dataset],
+                          polarity: Polarity | Literal["auto"]) -> tuple[str, Polarity]:
+    """The localisation channel and the part's polarity in it: of the channels, the most
+    separable one (Otsu) in which, at the taught pose, the part shows as a blob where
+    teach-in put it (``_part_at_centre``) in most frames; of the polarities (``auto``:
+    bright, then dark), the first that does so. Where none does, the most separable channel,
+    bright (training then says what it found instead)."""
+    frames = _taught_frames(sets)
+    polarities: tuple[Polarity, ...] = ("bright", "dark") if polarity == "auto" else (polarity,)
+    for channel in sorted(otsu, key=lambda c: -otsu[c][1]):
+        threshold = otsu[channel][0]
+        for pol in polarities:
+            seen = sum(_part_at_centre(binarise(candidates[channel][name][i], threshold, pol)
+                                       .astype(np.uint8)) for name, i in frames)
+            if frames and seen * 2 > len(frames):
+                return channel, pol
+    return max(otsu, key=lambda c: otsu[c][1]), polarities[0]
+
+
+def prepare_training(sets: dict[str, Dataset], polarity: Polarity | Literal["auto"] = "auto",
                      channel: Channel | Literal["auto"] = "max",
                      edge_gamma: float = 0.0) -> PreparedSets:
     """The front end every system trains first: intensity statistics, localisation channel
@@ -210,9 +263,12 @@ def prepare_training(sets: dict[str, Dataset], polarity: Polarity = "bright",
 
     Args:
         sets: the training sets by name (one of them named "nn2").
-        polarity: "bright" if the object is brighter than the table after max(R, G, B).
+        polarity: "bright" if the object is brighter than the table in the channel, "dark"
+            if darker, "auto": found from the frames at the taught pose
+            (``_channel_and_polarity``).
         channel: "max", "saturation", or "auto": the channel in which the part stands out
-            from its background best (Otsu's separability on the training images).
+            from its background best (Otsu's separability on the training images) and shows
+            where teach-in put it (``_channel_and_polarity``).
         edge_gamma: the camera's output gamma: the part's edge is read from the frame's colour
             (``localise.colour_centre``); 0: from the channel's grey levels.
 
@@ -244,10 +300,10 @@ def prepare_training(sets: dict[str, Dataset], polarity: Polarity = "bright",
         if channel == "saturation":
             del candidates["max"]
     otsu = {c: _otsu([n for ns in imgs.values() for n in ns]) for c, imgs in candidates.items()}
-    channel = max(otsu, key=lambda c: otsu[c][1])
+    channel, polarity = _channel_and_polarity(candidates, otsu, sets, polarity)
     threshold = otsu[channel][0]
     located = candidates[channel]
-    logger.info("localisation channel %s (separability %s)", channel,
+    logger.info("localisation channel %s, %s part (separability %s)", channel, polarity,
                 ", ".join(f"{c} {v[1]:.2f}" for c, v in otsu.items()))
 
     edge = ColourEdge(edge_gamma, fill_holes=True) if edge_gamma else None
@@ -444,7 +500,7 @@ def nn1_samples(sets: dict[str, Dataset], prep: PreparedSets) -> tuple[np.ndarra
 def train_bundle(nn1_data: Dataset, nn2_data: Dataset, *, object_kind: str, kappa: int,
                  nominal_pose: Pose | Mapping[str, float], gabor: GaborConfig | None = None,
                  nn2_hidden: tuple[int, ...] = NN2_HIDDEN, seed: int = 0,
-                 nn1_extra: Dataset | None = None, polarity: Polarity = "bright",
+                 nn1_extra: Dataset | None = None, polarity: Polarity | Literal["auto"] = "auto",
                  nn1_epochs: int = NN1_EPOCHS, nn2_epochs: int = NN2_EPOCHS,
                  nn2_weight_decay: float | None = None,
                  localisation_channel: Channel | Literal["auto"] = "auto",
@@ -470,7 +526,7 @@ def train_bundle(nn1_data: Dataset, nn2_data: Dataset, *, object_kind: str, kapp
         seed: seeds NN1 (NN2 uses seed + 1, the full loop's net seed + 2).
         nn1_extra: more (u, v) -> (dx, dy) samples for NN1, typically ``nn2_data``, so NN1 is
             precise near the nominal pose, where the positioning loop settles.
-        polarity: "bright" if the object is brighter than the table after max(R, G, B).
+        polarity: "bright", "dark" or "auto" (``training.prepare_training``).
         nn1_epochs: NN1's Rprop steps (at most).
         nn2_epochs: NN2's Rprop steps (at most).
         nn2_weight_decay: L2 penalty on NN2's weights (0 = none; None: the part's default,

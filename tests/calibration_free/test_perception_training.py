@@ -357,3 +357,21 @@ def test_of_two_candidates_the_one_of_the_parts_colour_is_taken(bundle, cell):
                      render_at(green, u0 + 70.0, v0, 0.0))
     p = Perception(bundle).perceive(near)
     assert p.ok and abs(p.u_px - (u0 + 3.0)) < 1.0
+
+
+def test_a_part_darker_than_its_table_is_found_dark_at_the_taught_pose():
+    from calibration_free.dataset import grid_offsets, staggered_grid_offsets
+    from calibration_free.synthetic import SyntheticCell, render_dataset
+
+    dark = SyntheticCell(object_rgb=(70, 45, 35), hole_rgb=(25, 20, 15),
+                         table_rgb=(205, 200, 190))
+    rng = np.random.default_rng(3)
+    sets = {"nn1": render_dataset(dark, grid_offsets(25.0, 180.0 / KAPPA), rng),
+            "nn2": render_dataset(dark, staggered_grid_offsets(5.0, 180.0 / KAPPA), rng)}
+    prep = training.prepare_training(sets, channel="max")
+    assert prep.front.polarity == "dark"
+    assert len(prep.usable["nn1"]) == len(sets["nn1"].images)
+    centre = prep.centres("nn2").mean(axis=0)
+    assert np.hypot(*(centre - dark.nominal_uv_px)) < 3.0
+    with pytest.raises(TrainingError, match="it is the table"):
+        training.prepare_training(sets, polarity="bright", channel="max")

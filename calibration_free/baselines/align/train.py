@@ -42,7 +42,7 @@ logger = logging.getLogger(__name__)
 
 def train_align(nn1_data: Dataset, nn2_data: Dataset, *, object_kind: str, kappa: int,
                 nominal_pose: Pose | Mapping[str, float], config: AlignConfig | None = None,
-                polarity: Polarity = "bright",
+                polarity: Polarity | Literal["auto"] = "auto",
                 localisation_channel: Channel | Literal["auto"] = "auto") -> AlignModel:
     """Train the image-alignment servo.
 
@@ -51,7 +51,7 @@ def train_align(nn1_data: Dataset, nn2_data: Dataset, *, object_kind: str, kappa
         nn2_data: the rotation set (3x3x7 grid, a = 5 mm, b = 180/kappa deg).
         object_kind, kappa, nominal_pose: what is taught.
         config: the servo's settings; None is AlignConfig().
-        polarity: "bright" if the part is brighter than the table after max(R, G, B).
+        polarity: "bright", "dark" or "auto" (``training.prepare_training``).
         localisation_channel: as for the Gabor system (``train_bundle``).
 
     Raises:

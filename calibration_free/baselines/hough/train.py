@@ -17,6 +17,7 @@ import logging
 import math
 import time
 from collections.abc import Mapping
+from typing import Literal
 
 import numpy as np
 
@@ -103,7 +104,7 @@ def _psom(labels: np.ndarray, locs: list[Localisation], kappa: int) \
 
 def train_hough(nn1_data: Dataset, nn2_data: Dataset, *, object_kind: str, kappa: int,
                 nominal_pose: Pose | Mapping[str, float], config: HoughConfig | None = None,
-                polarity: Polarity = "bright") -> HoughModel:
+                polarity: Polarity | Literal["auto"] = "auto") -> HoughModel:
     """Train the Hough system.
 
     Args:
@@ -112,7 +113,7 @@ def train_hough(nn1_data: Dataset, nn2_data: Dataset, *, object_kind: str, kappa
         nn2_data: the rotation set (paper: 3x3x7 grid, a = 5 mm, b = 180/kappa deg).
         object_kind, kappa, nominal_pose: what is taught (kappa even, >= 4).
         config: the Hough system's settings; None is HoughConfig().
-        polarity: "bright" if the object is brighter than the table after max(R, G, B).
+        polarity: "bright", "dark" or "auto" (``training.prepare_training``).
 
     Raises:
         TrainingError: bad arguments or images, an odd kappa, no training outline, a valid

@@ -10,6 +10,7 @@ from __future__ import annotations
 import logging
 import time
 from collections.abc import Mapping
+from typing import Literal
 
 import numpy as np
 
@@ -37,7 +38,7 @@ logger = logging.getLogger(__name__)
 def train_pca(nn1_data: Dataset, nn2_data: Dataset, *, object_kind: str, kappa: int,
               nominal_pose: Pose | Mapping[str, float], config: PcaConfig | None = None,
               seed: int = 0, nn1_extra: Dataset | None = None,
-              polarity: Polarity = "bright") -> PcaModel:
+              polarity: Polarity | Literal["auto"] = "auto") -> PcaModel:
     """Train the PCA system.
 
     Args:
@@ -47,7 +48,7 @@ def train_pca(nn1_data: Dataset, nn2_data: Dataset, *, object_kind: str, kappa: 
         config: eigenimages and fuzzy controller settings; None is PcaConfig().
         seed: seeds NN1.
         nn1_extra: more (u, v) -> (dx, dy) samples for NN1 (as the Gabor system: the NN2 set).
-        polarity: "bright" if the object is brighter than the table after max(R, G, B).
+        polarity: "bright", "dark" or "auto" (``training.prepare_training``).
 
     Raises:
         TrainingError: bad arguments or images (see ``training.prepare_training``), m larger
