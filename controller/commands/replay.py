@@ -7,6 +7,10 @@ centres (green), the taught centre (white cross) and the commanded step's expect
 when the frame was taken. One video frame and one sheet tile per look.
 
 Example: finepos replay run.mcap --out run.mp4 --sheet run.png
+
+The output folders must exist; the files appear complete or not at all. A recording that is not
+a regular file, a frame larger than 4096x4096 or a record of the wrong shape is one error line
+naming the file and what is wrong (exit status 2).
 """
 
 from __future__ import annotations
@@ -14,7 +18,7 @@ from __future__ import annotations
 import argparse
 
 from controller.commands.common import positive_float
-from controller.recording.replay import read_looks, write_sheet, write_video
+from controller.recording.replay import check_output, read_looks, write_sheet, write_video
 from drivers.core.errors import ConfigError
 from drivers.core.files import write_json
 
@@ -23,6 +27,9 @@ def run(args) -> int:
     """Read the recording, write the video and/or the sheet, print what was written (JSON)."""
     if args.out is None and args.sheet is None:
         raise ConfigError("replay: give --out FILE.mp4, --sheet FILE.png or both")
+    for out in (args.out, args.sheet):  # before the recording is read: no folder is made
+        if out is not None:
+            check_output(out)
     looks = read_looks(args.recording)
     report = {"recording": args.recording, "looks": len(looks),
               "runs": len({look.record.get("run_id") for look in looks})}

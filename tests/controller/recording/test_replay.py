@@ -154,3 +154,216 @@ def test_a_run_that_cannot_start_leaves_no_log_and_names_the_command(tmp_path, c
     assert err[-1] == (f"finepos: error: {state / 'model-gabor.fpm'}: no trained gabor model; "
                        "run `finepos train` first")
     assert not log.exists() and not rec.exists()
+
+
+# -- recordings from outside (issue 51, defect 6): bounded, checked, one line each -------------
+def _frame(width: int = 32, height: int = 24, fmt: str = ".jpg") -> bytes:
+    ok, encoded = cv2.imencode(fmt, np.full((height, width, 3), 90, np.uint8))
+    assert ok
+    return encoded.tobytes()
+
+
+def _record(**fields) -> dict:
+    return {"run_id": "r", "iteration": 1, "loop_kind": "half", "loops": 0.5, "status": "ok",
+            "commanded": None, "error": None, "error_at_look": None,
+            "overlay": {"centre_px": [16.0, 12.0], "box_px": [10.0, 6.0, 22.0, 18.0],
+                        "roi_px": 8.0, "gabor_px": [[14.0, 10.0]], "taught_px": [16.0, 12.0],
+                        "arrow_px": [[16.0, 12.0], [17.0, 13.0]]}, **fields}
+
+
+def _write_recording(path, looks) -> None:
+    """A recording of ``looks``: (image message body, iteration record body) pairs, either
+    given as raw bytes or as JSON-able values."""
+    from mcap.writer import Writer
+
+    from controller.recording import schemas
+
+    def data(body) -> bytes:
+        return body if isinstance(body, bytes) else json.dumps(body).encode()
+
+    with open(path, "wb") as f:
+        writer = Writer(f)
+        writer.start()
+        channels = {}
+        for topic in (schemas.IMAGE_TOPIC, schemas.ITERATION_TOPIC):
+            name, schema = schemas.CHANNELS[topic]
+            schema_id = writer.register_schema(name=name, encoding="jsonschema",
+                                               data=json.dumps(schema).encode())
+            channels[topic] = writer.register_channel(topic=topic, message_encoding="json",
+                                                      schema_id=schema_id)
+        for i, (image, record) in enumerate(looks):
+            t_ns = (i + 1) * 1_000_000
+            for topic, body in ((schemas.IMAGE_TOPIC, image), (schemas.ITERATION_TOPIC, record)):
+                writer.add_message(channels[topic], log_time=t_ns, publish_time=t_ns,
+                                   data=data(body))
+        writer.finish()
+
+
+def _image(frame: bytes = None) -> dict:
+    import base64
+
+    return {"data": base64.b64encode(frame or _frame()).decode(), "format": "jpeg"}
+
+
+def _one_line_error(capsys, argv) -> str:
+    assert main(argv) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and err[0].startswith("finepos: error: "), err
+    assert "internal error" not in err[0]
+    return err[0]
+
+
+def test_a_well_formed_hand_written_recording_replays(tmp_path, capsys):
+    _write_recording(tmp_path / "ok.mcap", [(_image(), _record()),
+                                            (_image(_frame(fmt=".png")), _record(iteration=2))])
+    assert main(["replay", str(tmp_path / "ok.mcap"), "--out", str(tmp_path / "ok.mp4"),
+                 "--sheet", str(tmp_path / "ok.png")]) == 0
+    assert '"looks": 2' in capsys.readouterr().out
+    assert len(_decoded_frames(tmp_path / "ok.mp4")) == 2
+
+
+@pytest.mark.timeout(30)  # it hung for ever on the FIFO
+def test_a_fifo_or_device_as_recording_is_refused_at_once(tmp_path, capsys):
+    import os
+
+    os.mkfifo(tmp_path / "pipe.mcap")  # opening it for reading would block without a writer
+    for source in (tmp_path / "pipe.mcap", "/dev/zero"):
+        err = _one_line_error(capsys, ["replay", str(source), "--out", str(tmp_path / "v.mp4")])
+        assert str(source) in err and "not a regular file" in err
+    assert not (tmp_path / "v.mp4").exists()
+
+
+def _claiming(width: int, height: int) -> bytes:
+    """A small JPEG whose frame header claims ``width`` x ``height`` pixels."""
+    data = bytearray(_frame())
+    sof = data.index(b"\xff\xc0")
+    data[sof + 5:sof + 9] = height.to_bytes(2, "big") + width.to_bytes(2, "big")
+    return bytes(data)
+
+
+def test_frame_sizes_are_read_from_the_header_before_decoding(tmp_path, capsys, monkeypatch):
+    decoded = []
+    real = cv2.imdecode
+    monkeypatch.setattr(cv2, "imdecode", lambda *a: decoded.append(1) or real(*a))
+    _write_recording(tmp_path / "huge.mcap", [(_image(_claiming(20000, 20000)), _record())])
+    err = _one_line_error(capsys, ["replay", str(tmp_path / "huge.mcap"),
+                                   "--out", str(tmp_path / "v.mp4")])
+    assert "huge.mcap" in err and "20000x20000" in err and "4096x4096" in err
+    assert decoded == []  # refused before OpenCV allocated anything
+    _write_recording(tmp_path / "mixed.mcap", [(_image(), _record()),
+                                               (_image(_frame(64, 48)), _record())])
+    err = _one_line_error(capsys, ["replay", str(tmp_path / "mixed.mcap"),
+                                   "--sheet", str(tmp_path / "s.png")])
+    assert "a 64x48 frame in a recording of 32x24 frames" in err
+
+
+BAD_SHAPES = {
+    "record is a list": (_image(), [1, 2], "expected an iteration record"),
+    "centre is text": (_image(), _record(overlay={"centre_px": "abc"}), "overlay.centre_px"),
+    "centre at 1e308": (_image(), _record(overlay={"centre_px": [1e308, 0.0]}),
+                        "overlay.centre_px"),
+    "arrow of NaN": (_image(), b'{"overlay": {"arrow_px": [[NaN, 1], [2, 3]]}}',
+                     "overlay.arrow_px"),
+    "box of three": (_image(), _record(overlay={"box_px": [1, 2, 3]}), "overlay.box_px"),
+    "loops 10**400": (_image(), _record(loops=10 ** 400), "loops"),
+    "step of text": (_image(), _record(commanded={"dx_mm": "x", "dy_mm": 0, "dphi_deg": 0}),
+                     "commanded.dx_mm"),
+    "error without phi": (_image(), _record(error={"x_mm": 1, "y_mm": 2}), "error.phi_deg"),
+    "run id a list": (_image(), _record(run_id=[1]), "run_id"),
+    "image is a list": ([1], _record(), "base64 string"),
+    "data not base64": ({"data": "!!!", "format": "jpeg"}, _record(), "not base64"),
+    "frame not an image": (_image(b"GIF89a" + b"\0" * 40), _record(), "neither JPEG nor PNG"),
+    "JPEG without header": (_image(b"\xff\xd8\xff\xd9" + b"\0" * 20), _record(),
+                            "no frame header"),
+    "image JSON broken": (b'{"data": ', _record(), "not a readable finepos recording"),
+    "nesting 100000 deep": (_image(), b"[" * 100_000 + b"]" * 100_000,
+                            "not a readable finepos recording"),
+}
+
+
+@pytest.mark.parametrize("case", BAD_SHAPES)
+def test_a_recording_of_the_wrong_shape_is_one_line_naming_file_and_fault(tmp_path, capsys,
+                                                                          case):
+    image, record, expected = BAD_SHAPES[case]
+    _write_recording(tmp_path / "bad.mcap", [(image, record)])
+    err = _one_line_error(capsys, ["replay", str(tmp_path / "bad.mcap"),
+                                   "--out", str(tmp_path / "v.mp4"),
+                                   "--sheet", str(tmp_path / "s.png")])
+    assert str(tmp_path / "bad.mcap") in err and expected in err, err
+    assert len(err) < 700
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["bad.mcap"]
+
+
+def test_an_output_in_a_missing_folder_is_refused_and_no_folder_made(tmp_path, capsys):
+    _write_recording(tmp_path / "ok.mcap", [(_image(), _record())])
+    for option in ("--out", "--sheet"):
+        err = _one_line_error(capsys, ["replay", str(tmp_path / "ok.mcap"), option,
+                                       str(tmp_path / "missing" / "x.mp4")])
+        assert "no such folder" in err and str(tmp_path / "missing") in err
+        assert not (tmp_path / "missing").exists()
+
+
+_VIDEO_WRITER = cv2.VideoWriter
+
+
+class _DiskFullWriter:
+    """cv2.VideoWriter as it behaves on a full disk: it stops writing without a word."""
+
+    def __init__(self, path, *args) -> None:
+        self._real = _VIDEO_WRITER(path, *args)
+        self._frames = 0
+
+    def isOpened(self):  # noqa: N802 (OpenCV's name)
+        return self._real.isOpened()
+
+    def write(self, frame) -> None:
+        self._frames += 1
+        if self._frames == 1:
+            self._real.write(frame)
+
+    def release(self) -> None:
+        self._real.release()
+
+
+def test_a_video_that_could_not_be_written_fails_and_leaves_no_file(tmp_path, capsys,
+                                                                    monkeypatch):
+    from controller.recording import replay
+
+    _write_recording(tmp_path / "ok.mcap", [(_image(), _record(iteration=i)) for i in range(3)])
+    (tmp_path / "out").mkdir()
+    monkeypatch.setattr(replay.cv2, "VideoWriter", _DiskFullWriter)
+    err = _one_line_error(capsys, ["replay", str(tmp_path / "ok.mcap"),
+                                   "--out", str(tmp_path / "out" / "v.mp4")])
+    assert "v.mp4" in err and "1 of 3 frames" in err
+    assert list((tmp_path / "out").iterdir()) == []  # neither the video nor a temporary file
+
+
+@pytest.fixture
+def tiny_disk(tmp_path):
+    """A 64 KB tmpfs (root only; skipped otherwise), unmounted afterwards."""
+    import os
+    import subprocess
+
+    if os.geteuid() != 0:
+        pytest.skip("mounting a tmpfs needs root")
+    folder = tmp_path / "tiny"
+    folder.mkdir()
+    if subprocess.run(["mount", "-t", "tmpfs", "-o", "size=64k", "tmpfs", str(folder)],
+                      check=False, capture_output=True).returncode != 0:
+        pytest.skip("cannot mount a tmpfs here")
+    try:
+        yield folder
+    finally:
+        subprocess.run(["umount", "-l", str(folder)], check=False)
+
+
+def test_replay_onto_a_full_disk_exits_non_zero_and_leaves_no_file(tmp_path, tiny_disk, capsys):
+    rng = np.random.default_rng(0)
+    noisy = [cv2.imencode(".jpg", rng.integers(0, 255, (144, 192, 3), np.uint8))[1].tobytes()
+             for _ in range(12)]  # noise compresses badly: the video outgrows 64 KB
+    _write_recording(tmp_path / "ok.mcap", [(_image(f), _record()) for f in noisy])
+    for option, name in (("--out", "v.mp4"), ("--sheet", "s.png")):
+        assert main(["replay", str(tmp_path / "ok.mcap"), option, str(tiny_disk / name)]) != 0
+        err = capsys.readouterr().err.strip().splitlines()
+        assert len(err) == 1 and name in err[0] and "internal error" not in err[0], err
+        assert list(tiny_disk.iterdir()) == []
