@@ -8,13 +8,13 @@ and the view must match the acquisition's image at that pose (similarity at leas
 --min-similarity; defaults at the end of --help). Prints what it measured (JSON). Exit status 1
 when the check fires: the camera (knocked, another lens) or the part has changed and the cell
 needs a new teach-in (teach, acquire, train) before it positions again; 2 when nothing is
-taught or trained yet.
+taught or trained yet, or a file it reads is damaged: the teach-in, the model or an acquired
+set (nn1, nn2: each stored one is read whole, before the arm moves), named in the error line.
 """
 
 from __future__ import annotations
 
 import argparse
-import dataclasses
 
 from controller.commands.common import (
     add_config_option,
@@ -22,7 +22,7 @@ from controller.commands.common import (
     config_from_args,
     positive_float,
 )
-from controller.config import cell_part
+from controller.config import cell_part, with_part
 from controller.devices import open_devices
 from controller.fine_positioner import FinePositioner
 from controller.teach.self_check import (
@@ -37,21 +37,11 @@ from drivers.core import parts
 from drivers.core.files import write_json
 
 
-def _with_part(config, kind: str):
-    """The config with ``controller.part`` (and the simulated table's part) set to ``kind``."""
-    parts.part(kind)  # ConfigError naming the allowed parts
-    scene = config.scene
-    obj = dataclasses.replace(scene.object, kind=kind)
-    return dataclasses.replace(
-        config, controller=dataclasses.replace(config.controller, part=kind),
-        scene=dataclasses.replace(scene, object=obj))
-
-
 def run(args) -> int:
     """Run the self-check, print what it measured (JSON); 1 when it fires."""
     config = config_from_args(args)
     if args.part is not None:
-        config = _with_part(config, args.part)
+        config = with_part(config, args.part)
     folder = StateFolder(args.state_dir or config.controller.paths.state_dir, cell_part(config))
     kind = folder.resolve(args.part, cell_part(config))
     taught = folder.taught()

@@ -30,6 +30,7 @@ from collections.abc import Callable
 from pathlib import Path
 from typing import Any
 
+from calibration_free.errors import DatasetError
 from controller.config import cell_part, with_part
 from controller.devices import open_devices
 from controller.fine_positioner import FinePositioner
@@ -192,9 +193,9 @@ class Service:
 
     def _start_up_check(self) -> None:
         """``service.self_check_at_start``: look at the taught pose (the arm moves there) and
-        go to fault when the camera or the part has changed since teach-in, instead of
-        positioning on a wrong mapping. Skipped, with a log line, when nothing is taught or
-        trained yet or the devices did not open."""
+        go to fault when the camera or the part has changed since teach-in, or an acquired
+        set it compares with is damaged, instead of positioning on a wrong mapping. Skipped,
+        with a log line, when nothing is taught or trained yet or the devices did not open."""
         if not self.config.service.self_check_at_start:
             return
         with self._machine.lock:
@@ -206,6 +207,10 @@ class Service:
         try:
             with self._device_lock:
                 result = run_self_check(fp, DEFAULT_SYSTEM)
+        except DatasetError as exc:  # an acquired set damaged: the check cannot vouch
+            with self._machine.lock:
+                self._enter_fault(f"self-check at start: {exc}", "self_check")
+            return
         except (FineposError, OSError) as exc:
             logger.warning("start-up self-check skipped: %s", exc)
             return

@@ -28,7 +28,6 @@ import cv2
 import numpy as np
 
 from calibration_free.dataset import Dataset
-from calibration_free.errors import DatasetError
 from controller.systems.estimator import corrective_step
 from controller.systems.registry import SYSTEMS
 
@@ -100,19 +99,28 @@ def similarity(a: np.ndarray, b: np.ndarray) -> float:
 
 def reference_image(fp) -> tuple[np.ndarray, str] | None:
     """The acquired image taken at the taught pose (the nn1 or nn2 image with the smallest step),
-    and where it comes from; None when no acquired set with one is stored."""
+    and where it comes from; None when no acquired set with one is stored.
+
+    Every stored set is read and checked whole (``Dataset.load``), the one not used for the
+    reference too: the check vouches for the files a re-training would use.
+
+    Raises:
+        DatasetError: a set is stored but cannot be read or is not a finepos dataset (a damaged
+            or replaced file); the message names it.
+    """
+    found = None
     for name in ("nn1", "nn2"):
-        try:
-            data = Dataset.load(fp.dataset_path(name))
-        except DatasetError:
+        path = fp.dataset_path(name)
+        if not (path.exists() or path.is_symlink()):  # not acquired (a dangling link is read)
             continue
-        if data.images is None or not len(data):
+        data = Dataset.load(path)
+        if found is not None or data.images is None or not len(data):
             continue
         norms = np.abs(data.labels).sum(axis=1)
         index = int(np.argmin(norms))
         if norms[index] <= 0.5:  # the grid point at the pose (plus the arm's repeatability)
-            return data.images[index], f"{name}[{index}]"
-    return None
+            found = data.images[index], f"{name}[{index}]"
+    return found
 
 
 def self_check(fp, system: str = "gabor", limits: CheckLimits = CheckLimits(),
@@ -126,10 +134,15 @@ def self_check(fp, system: str = "gabor", limits: CheckLimits = CheckLimits(),
         frames: frames averaged.
         model: the TrainedModel to check (default: ``system``'s stored model).
 
+    Everything it reads (the teach-in, the acquired sets, the model) is read and checked before
+    the arm moves.
+
     Raises:
-        StateError: nothing taught yet. BundleError: no model stored.
+        StateError: nothing taught yet. BundleError: no model stored, or a damaged one.
+        DatasetError: an acquired set is stored but unreadable (``reference_image``).
     """
     state = fp.state()
+    ref = reference_image(fp)
     model = model if model is not None else fp.load_model(system=system)
     estimator = SYSTEMS[model.system].estimator(model)
     fp.move_to(state.nominal_pose)
@@ -156,7 +169,6 @@ def self_check(fp, system: str = "gabor", limits: CheckLimits = CheckLimits(),
             reasons.append(f"at the taught pose the model wants to move {shift:.2f} mm / "
                            f"{dphi:+.2f} deg (limits {limits.max_correction_mm:g} mm / "
                            f"{limits.max_correction_deg:g} deg)")
-    ref = reference_image(fp)
     score = None
     if ref is not None:
         score = float(np.mean([similarity(image, ref[0]) for image in images]))

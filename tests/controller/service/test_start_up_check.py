@@ -4,6 +4,7 @@ refuses motion (fault ``self_check``) when the camera no longer sees what it was
 from __future__ import annotations
 
 import shutil
+from pathlib import Path
 
 import pytest
 
@@ -44,3 +45,17 @@ def test_start_up_check(tmp_path, short_dir, taught, knock_mm, state):
             assert "new teach-in" in status["fault"]["reason"]
             with pytest.raises(ServiceError, match="motion is refused until a reset"):
                 client.call("position", wait=True)
+
+
+def test_a_damaged_acquired_set_is_a_start_up_fault_naming_it(tmp_path, short_dir, taught):
+    config = service_config(tmp_path, short_dir, service={"self_check_at_start": True})
+    state = Path(shutil.copytree(taught, config.controller.paths.state_dir))
+    (state / "datasets").mkdir()
+    (state / "datasets" / "nn1.npz").write_bytes(b"garbage" * 500)
+    arm = FakeArm()
+    with running_service(config, device_opener(arm, FakeCamera(cube_view(arm)),
+                                               FakeWrenchSensor())) \
+            as service, client_for(service) as client:
+        status = client.call("status")
+        assert status["state"] == "fault" and status["fault"]["code"] == "self_check", status
+        assert str(state / "datasets" / "nn1.npz") in status["fault"]["reason"]
