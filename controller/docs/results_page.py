@@ -54,7 +54,8 @@ def load_reports(folder: str | Path) -> list[tuple[str, dict]]:
 
 def _reports(data: Any) -> Iterator[dict]:
     """The evaluate reports in a file's JSON: one, a list of them, or a mapping of them."""
-    if isinstance(data, dict) and "rms" in data and "safe_rate" in data:
+    if isinstance(data, dict) and (("rms" in data and "safe_rate" in data)
+                                   or data.get("randomize") is True):
         yield data
     elif isinstance(data, dict):
         for value in data.values():
@@ -75,6 +76,52 @@ def row(report: dict) -> list[str]:
             _number(rms.get("x_mm"), 3), _number(rms.get("y_mm"), 3),
             _number(rms.get("phi_deg"), 2), _number(grasp.get("median"), 2),
             f"`{report['command']}`"]
+
+
+def randomized_row(report: dict) -> list[str]:
+    """One row of the randomized-cell table: the yardstick's figures of ``report``."""
+    seen = report.get("visible_0.8") or {}
+    rms = seen.get("rms_2.5") or {}
+    stops = (report.get("stops_visible_0.85") or {}).get("stops") or {}
+    worst = report.get("worst_class") or {}
+    targets = report.get("targets") or {}
+    return [str(report.get("object", "")), str(report.get("system", "")),
+            str(report.get("trials", "")), str(report.get("seed", "")),
+            str(len(report.get("cells") or [])), _interval(seen.get("safe_2.5")),
+            _number(rms.get("x_mm"), 3), _number(rms.get("y_mm"), 3),
+            _number(rms.get("phi_deg"), 2), _interval(stops),
+            f"{worst.get('factor', '')} {worst.get('class', '')}: "
+            f"{_interval(worst.get('safe_2.5'))}"
+            if worst else "",
+            f"{sum(bool(v) for v in targets.values())} of {len(targets)}",
+            _number((report.get("wall_seconds") or 0) / 60.0, 1), f"`{report['command']}`"]
+
+
+def _interval(rate: Any) -> str:
+    """A Wilson rate ``{"rate", "low", "high"}`` in percent, with its interval."""
+    if not rate:
+        return ""
+    return (f"{100.0 * rate['rate']:.1f} ({100.0 * rate['low']:.1f}-"
+            f"{100.0 * rate['high']:.1f})")
+
+
+def _factor_tables(reports: list[dict]) -> list[str]:
+    """Per randomized report, its results by drawn factor (a collapsed table)."""
+    lines = []
+    for report in reports:
+        lines += ["", f"<details><summary>By drawn factor: {report['object']}, "
+                      f"{report['system']}, seed {report['seed']}</summary>", "",
+                  "| factor | class | trials | safe 2.5 (%) | x (mm) | y (mm) | angle (deg) |",
+                  "|---|---|---|---|---|---|---|"]
+        for name, rows in (report.get("by_factor") or {}).items():
+            for r in rows:
+                rms = r.get("rms_2.5") or {}
+                lines.append(f"| {name} | {r['class']} | {r['trials']} | "
+                             f"{_interval(r.get('safe_2.5'))} | {_number(rms.get('x_mm'), 3)} | "
+                             f"{_number(rms.get('y_mm'), 3)} | "
+                             f"{_number(rms.get('phi_deg'), 2)} |")
+        lines += ["", "</details>"]
+    return lines
 
 
 def _percent(value: Any) -> str:
@@ -107,7 +154,34 @@ def render(reports: list[tuple[str, dict]]) -> str:
     if not reports:
         lines += ["No reports yet."]
         return "\n".join(lines) + "\n"
-    lines += [
+    randomized = sorted((r for _, r in reports if r.get("randomize") is True),
+                        key=lambda r: (str(r.get("object")), str(r.get("system")),
+                                       str(r.get("seed")), str(r.get("command"))))
+    reports = [(name, r) for name, r in reports if r.get("randomize") is not True]
+    if randomized:
+        lines += [
+            "## Randomized cells",
+            "",
+            "`finepos evaluate --randomize`: every cell draws its camera, mount, table and "
+            "part colour and is trained under a drawn light; every trial draws its light, a "
+            "card over the part and clutter (docs/simulator.md). Safe within 2.5 loops and "
+            "the RMS after 2.5 loops are over the trials where at least 80% of the part is "
+            "visible; stops (occluded, ambiguous, no object) over those where 85% is; rates in "
+            "percent with their 95% Wilson intervals. The weakest class is the drawn factor's "
+            "class (10 trials or more) with the lowest safe rate. Targets: safe at least 99%, "
+            "RMS at most 0.05 / 0.05 mm and 0.3 deg, no class below 97%, stops at most 2%.",
+            "",
+            "| part | system | trials | seed | cells | safe 2.5 (%) | x (mm) | y (mm) "
+            "| angle (deg) | stops (%) | weakest class (%) | targets met | wall (min) "
+            "| command |",
+            "|---|---|---|---|---|---|---|---|---|---|---|---|---|---|",
+        ]
+        lines += ["| " + " | ".join(randomized_row(r)) + " |" for r in randomized]
+        lines += _factor_tables(randomized)
+        lines += [""]
+    if not reports:
+        return "\n".join(lines) + "\n"
+    lines += ["## Default cell", "",
         f"| part | light | system | trials | seed | safe 1.5 (%) | safe {BUDGET} (%) | x (mm) "
         "| y (mm) | angle (deg) | held part (s) | command |",
         "|---|---|---|---|---|---|---|---|---|---|---|---|",

@@ -83,6 +83,7 @@ VISIBLE_SAFE = 0.8  # trials where at least this share of the part is visible ..
 SAFE_TARGET = 0.99  # ... are safe within 2.5 loops at least this often
 RMS_TARGET = {"x_mm": 0.05, "y_mm": 0.05, "phi_deg": 0.3}
 CLASS_SAFE_TARGET = 0.97
+MIN_CLASS_TRIALS = 10  # a factor's class with fewer trials says too little to be the worst
 VISIBLE_STOPS = 0.85  # where at least this share is visible ...
 STOPS_TARGET = 0.02  # ... at most this share of the trials stops as one of STOP_KINDS
 STOP_KINDS = ("occluded", "ambiguous", "no_object")
@@ -409,7 +410,8 @@ def summarise_randomized(records: list[dict], cells: list[dict]) -> dict:
         outcomes[r["outcome"]] = outcomes.get(r["outcome"], 0) + 1
     factors = by_factor(records, cells)
     visible = _rates(seen)
-    worst = min((row for rows in factors.values() for row in rows if row["trials"] >= 10),
+    worst = min(({"factor": name, **row} for name, rows in factors.items() for row in rows
+                 if row["trials"] >= MIN_CLASS_TRIALS),
                 key=lambda row: row["safe_2.5"]["rate"], default=None)
     stop_rate = wilson(stops, len(mostly)) if mostly else None
     targets = {

@@ -70,3 +70,30 @@ def test_a_report_without_its_command_is_refused(tmp_path):
     (tmp_path / "r.json").write_text(json.dumps(report), encoding="utf-8")
     with pytest.raises(ConfigError, match="without its command"):
         results_page.load_reports(tmp_path)
+
+
+def test_a_randomized_report_becomes_a_row_of_its_own_table(tmp_path):
+    wilson = {"rate": 0.9, "low": 0.8, "high": 0.95}
+    report = {"randomize": True, "object": "cube", "system": "gabor", "trials": 50, "seed": 2,
+              "cells": [{}, {}], "wall_seconds": 120.0,
+              "command": "finepos evaluate --randomize --trials 50 --seed 2",
+              "visible_0.8": {"trials": 40, "safe_2.5": wilson,
+                              "rms_2.5": {"x_mm": 0.04, "y_mm": 0.05, "phi_deg": 0.3}},
+              "stops_visible_0.85": {"stops": {"rate": 0.05, "low": 0.01, "high": 0.1}},
+              "worst_class": {"factor": "gamma", "class": "1-1.35", "trials": 12,
+                              "safe_2.5": wilson},
+              "by_factor": {"gamma": [{"class": "1-1.35", "trials": 12, "safe_2.5": wilson,
+                                       "rms_2.5": {"x_mm": 0.1, "y_mm": 0.1,
+                                                   "phi_deg": 1.0}}]},
+              "targets": {"a": True, "b": False}}
+    (tmp_path / "random.json").write_text(json.dumps(report), encoding="utf-8")
+    page = results_page.render(results_page.load_reports(tmp_path))
+    assert "## Randomized cells" in page and "## Default cell" not in page
+    row = next(line for line in page.splitlines() if line.startswith("| cube | gabor | 50"))
+    cells = [c.strip() for c in row.strip("|").split(" | ")]
+    assert cells[:13] == ["cube", "gabor", "50", "2", "2", "90.0 (80.0-95.0)", "0.040",
+                          "0.050", "0.30", "5.0 (1.0-10.0)", "gamma 1-1.35: 90.0 (80.0-95.0)",
+                          "1 of 2", "2.0"]
+    assert "| gamma | 1-1.35 | 12 | 90.0 (80.0-95.0) | 0.100 | 0.100 | 1.00 |" in page
+    for command in results_page.commands(page):
+        _parses(command)

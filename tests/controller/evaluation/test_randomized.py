@@ -74,6 +74,7 @@ def test_the_summary_counts_targets_on_the_visible_trials_and_names_the_weak_cla
     rows = {row["class"]: row for row in out["by_factor"]["auto_exposure"]}
     assert rows["True"]["safe_2.5"]["rate"] == 1.0 and rows["False"]["trials"] == 17
     assert out["worst_class"]["safe_2.5"]["rate"] == 0.0
+    assert out["worst_class"]["factor"] in out["by_factor"]
     assert out["outcomes"] == {"converged": 20, "no_object": 12, "occluded": 5}
     met = rz.summarise_randomized(good, cells)
     assert all(met["targets"].values())
