@@ -194,8 +194,9 @@ def _checked_record(body: Any) -> dict[str, Any]:
     """An iteration record whose fields replay reads, checked for type and range."""
     if not isinstance(body, dict):
         raise _Bad(f"expected an iteration record (an object), got {_type(body)}")
-    for key in ("iteration", "loops"):
-        _number(body.get(key), key, MAX_VALUE, optional=True)
+    _number(body.get("iteration"), "iteration", MAX_VALUE, optional=True)
+    if "loops" in body:  # written with a number format
+        _number(body["loops"], "loops", MAX_VALUE)
     for key in ("loop_kind", "status", "run_id"):
         value = body.get(key)
         if value is not None and not (isinstance(value, str) and len(value) <= MAX_TEXT) \

@@ -266,6 +266,7 @@ BAD_SHAPES = {
                      "overlay.arrow_px"),
     "box of three": (_image(), _record(overlay={"box_px": [1, 2, 3]}), "overlay.box_px"),
     "loops 10**400": (_image(), _record(loops=10 ** 400), "loops"),
+    "loops null": (_image(), _record(loops=None), "loops"),
     "step of text": (_image(), _record(commanded={"dx_mm": "x", "dy_mm": 0, "dphi_deg": 0}),
                      "commanded.dx_mm"),
     "error without phi": (_image(), _record(error={"x_mm": 1, "y_mm": 2}), "error.phi_deg"),
