@@ -52,7 +52,7 @@ def _locked_setup(args, command: str, *, teach: bool = False, devices: bool = Tr
     config = config_from_args(args)
     if devices:
         config = apply_device_options(config, args)
-    with locked_state_folder(state_root(args, config), f"finepos {command}"):
+    with locked_state_folder(state_root(args, config), f"finepos {command}", create=teach):
         yield part_setup(args, config, teach=teach)
 
 

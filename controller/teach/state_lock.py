@@ -44,21 +44,28 @@ class StateFolderLocked(StateLockError):
 
 
 @contextlib.contextmanager
-def locked_state_folder(root: str | Path, holder: str) -> Iterator[Path]:
-    """Hold the lock of state folder ``root`` (created if missing) for the block.
+def locked_state_folder(root: str | Path, holder: str, *, create: bool = True) \
+        -> Iterator[Path | None]:
+    """Hold the lock of state folder ``root`` for the block.
 
     Args:
         root: the state folder (``controller.paths.state_dir`` or ``--state-dir``).
         holder: what holds it, for the error another writer gets (``finepos teach``).
+        create: create ``root`` when missing; otherwise a missing folder is not locked (a
+            command that needs its teach-in there then says that nothing is taught, and a
+            mistyped path leaves no folder behind).
 
     Yields:
-        The lock file's path.
+        The lock file's path (None: no folder, no lock).
 
     Raises:
         StateFolderLocked: another process holds it (the message names its PID).
         StateLockError: the lock file is a symlink or not a regular file.
     """
     root = Path(root)
+    if not create and not root.is_dir():
+        yield None
+        return
     root.mkdir(parents=True, exist_ok=True)
     path = root / LOCK_NAME
     try:  # never through a planted link, never blocking on a FIFO

@@ -94,3 +94,13 @@ def test_a_cli_writer_releases_the_folder_when_it_fails(tmp_path, capsys):
     assert "in use" not in capsys.readouterr().err
     with locked_state_folder(tmp_path, "next"):
         pass
+
+
+def test_only_teach_creates_a_missing_state_folder(tmp_path, capsys):
+    missing = tmp_path / "typo"
+    assert cli.main(["train", "--state-dir", str(missing)]) == 2  # nothing taught there
+    assert not missing.exists()
+    with locked_state_folder(missing, "x", create=False) as path:
+        assert path is None
+    with locked_state_folder(missing, "x") as path:
+        assert path == missing / LOCK_NAME
