@@ -6,6 +6,11 @@ Sections: ``arm``, ``camera``, ``wrench`` (backend ``type`` plus that backend's 
 ``drivers.core.timing``). Unknown keys, wrong types and out-of-range
 values fail at load with the full key path. With no file, every default applies: the simulated
 cell, good light, the cube.
+
+The ``scene`` section is the simulator's: it is read (into
+``sim_backend.cell.scene_config.SceneConfig``, through ``controller.simulated``) only when a
+device is simulated; on a real cell it stays as written (``controller.simulated.UnreadScene``),
+for the emulators that read it from the file.
 """
 
 from __future__ import annotations
@@ -13,7 +18,7 @@ from __future__ import annotations
 import dataclasses
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any, Literal
+from typing import TYPE_CHECKING, Any, Literal
 
 from calibration_free.baselines.align.model import AlignConfig
 from calibration_free.baselines.hough.model import HoughConfig
@@ -21,6 +26,7 @@ from calibration_free.baselines.pca.model import PcaConfig
 from calibration_free.gabor import GaborConfig
 from calibration_free.localise import DEFAULT_CAMERA_GAMMA
 from calibration_free.training import NN2_HIDDEN
+from controller import simulated
 from controller.devices import DeviceSection, parse_device_section
 from controller.loop.grasp import GraspConfig
 from controller.loop.positioning import LoopConfig
@@ -28,10 +34,13 @@ from controller.service.config import ServiceConfig
 from controller.teach.spacenav import TeachConfig
 from controller.teach.state_folder import check_part
 from drivers.core.errors import ConfigError
+from drivers.core.parts import PartKind
 from drivers.core.timing import TimingConfig
 from drivers.core.typed_config import from_mapping, load_yaml_file
 from drivers.safety import SafetyLimits
-from sim_backend.cell.scene_config import PartKind, SceneConfig
+
+if TYPE_CHECKING:
+    from sim_backend.cell.scene_config import SceneConfig
 
 
 @dataclass(frozen=True)
@@ -165,12 +174,16 @@ class PerceptionConfig:
 
 @dataclass(frozen=True)
 class FineposConfig:
-    """The whole configuration: one field per section, and the file it came from."""
+    """The whole configuration: one field per section, and the file it came from.
+
+    scene: the simulated cell, a ``SceneConfig`` when a device is simulated (else the section
+    unread, ``controller.simulated.UnreadScene``).
+    """
 
     arm: DeviceSection
     camera: DeviceSection
     wrench: DeviceSection
-    scene: SceneConfig = SceneConfig()
+    scene: SceneConfig | simulated.UnreadScene = simulated.UnreadScene()
     safety: SafetyLimits = SafetyLimits()
     perception: PerceptionConfig = PerceptionConfig()
     controller: ControllerConfig = ControllerConfig()
@@ -188,11 +201,12 @@ def config_from_mapping(data: dict[str, Any], source: str = "<mapping>") -> Fine
     unknown = sorted(str(k) for k in data if k not in SECTIONS)
     if unknown:
         raise ConfigError(f"{unknown[0]}: unknown section (allowed: {', '.join(SECTIONS)})")
+    devices = {kind: parse_device_section(kind, data.get(kind))
+               for kind in ("arm", "camera", "wrench")}
     return FineposConfig(
-        arm=parse_device_section("arm", data.get("arm")),
-        camera=parse_device_section("camera", data.get("camera")),
-        wrench=parse_device_section("wrench", data.get("wrench")),
-        scene=from_mapping(SceneConfig, data.get("scene"), "scene"),
+        **devices,
+        scene=simulated.scene_section(
+            data.get("scene"), any(d.type == "sim" for d in devices.values())),
         safety=from_mapping(SafetyLimits, data.get("safety"), "safety"),
         perception=from_mapping(PerceptionConfig, data.get("perception"), "perception"),
         controller=from_mapping(ControllerConfig, data.get("controller"), "controller"),
@@ -226,14 +240,15 @@ def cell_part(config: FineposConfig) -> str:
 
 def with_part(config: FineposConfig, kind: str) -> FineposConfig:
     """``config`` set up for part ``kind``: ``controller.part``, and the simulated table's part
-    (``scene.object.kind``; its placement and colour stay the scene's).
+    (``scene.object.kind``; its placement and colour stay the scene's; an unread scene, on a
+    real cell, stays as written).
 
     Raises:
         ConfigError: ``kind`` is not in the parts catalogue (the message lists the parts).
     """
     check_part(kind)
     scene = config.scene
-    if scene.object.kind != kind:
+    if not isinstance(scene, simulated.UnreadScene) and scene.object.kind != kind:
         scene = dataclasses.replace(scene, object=dataclasses.replace(scene.object, kind=kind))
     return dataclasses.replace(
         config, controller=dataclasses.replace(config.controller, part=kind), scene=scene)

@@ -3,7 +3,9 @@
 ``arm: {type: sim}`` or ``arm: {type: val, port: /dev/ttyS0, ...}``: ``type`` picks the
 backend, the other keys are that backend's options, checked strictly at load. ``open_devices``
 builds the configured arm, camera and wrench sensor (sharing one simulated cell where any of
-them is simulated) and closes everything it opened, in reverse order.
+them is simulated) and closes everything it opened, in reverse order. The ``sim`` backends and
+the simulated cell come through ``controller.simulated``, which loads the simulator only when a
+config names one.
 """
 
 from __future__ import annotations
@@ -15,13 +17,13 @@ from collections.abc import Callable
 from dataclasses import dataclass
 from typing import Any
 
+from controller import simulated
 from drivers.ati.config import AtiConfig
 from drivers.camera.config import OpenCvCameraConfig
 from drivers.core.errors import ConfigError
 from drivers.core.typed_config import from_mapping, to_mapping
 from drivers.interfaces import Arm, Camera, WrenchSensor
 from drivers.val.config import ValConfig
-from sim_backend.cell.scene_config import SimArmConfig
 
 
 @dataclass(frozen=True)
@@ -39,10 +41,19 @@ class NoOptions:
 
 @dataclass(frozen=True)
 class Backend:
-    """One backend of a device kind: its options' type and how to build the device."""
+    """One backend of a device kind: its options' type and how to build the device.
 
-    options: type
+    options: the options' dataclass, or a function returning it (the simulated arm's, so the
+    simulator's types load only when a config names that backend; see ``options_type``).
+    """
+
+    options: type | Callable[[], type]
     build: Callable[[Any, Any], Any]  # (options, DeviceContext) -> device
+
+    @property
+    def options_type(self) -> type:
+        """The options' dataclass."""
+        return self.options if isinstance(self.options, type) else self.options()
 
 
 class DeviceContext:
@@ -59,12 +70,7 @@ class DeviceContext:
     def cell(self):
         """The simulated work cell (created on first use)."""
         if self._cell is None:
-            from sim_backend.cell.sim_cell import SimCell
-
-            arm_opts = (self.config.arm.options if self.config.arm.type == "sim"
-                        else SimArmConfig())
-            self._cell = self._stack.enter_context(
-                SimCell(self.config.scene, arm_opts, seed=self.seed))
+            self._cell = self._stack.enter_context(simulated.build_cell(self.config, self.seed))
         return self._cell
 
     @property
@@ -72,10 +78,8 @@ class DeviceContext:
         """The simulated cell's timing (``sim_backend.cell.timing.CellTiming``: a virtual clock
         when ``scene.timing`` is realistic), or None when ideal. Shared by the simulated
         devices."""
-        if self._timing is None and self.config.scene.timing != "ideal":
-            from sim_backend.cell.timing import cell_timing
-
-            self._timing = cell_timing(self.config.scene.timing, self.config.timing)
+        if self._timing is None:
+            self._timing = simulated.cell_timing(self.config)
         return self._timing
 
     def clock(self) -> float:
@@ -94,34 +98,16 @@ class DeviceContext:
         self._stack.close()
 
 
-def _sim_arm(options, ctx: DeviceContext) -> Arm:
-    from sim_backend.devices import SimArm
-
-    return SimArm(ctx.cell, ctx.config.safety, ctx.timing)
-
-
 def _val_arm(options, ctx: DeviceContext) -> Arm:
     from drivers.val import ValArm
 
     return ValArm(options, ctx.config.safety)
 
 
-def _sim_camera(options, ctx: DeviceContext) -> Camera:
-    from sim_backend.devices import SimCamera
-
-    return SimCamera(ctx.cell, ctx.timing)
-
-
 def _opencv_camera(options, ctx: DeviceContext) -> Camera:
     from drivers.camera import OpenCvCamera
 
     return OpenCvCamera(options)
-
-
-def _sim_wrench(options, ctx: DeviceContext) -> WrenchSensor:
-    from sim_backend.devices import SimWrenchSensor
-
-    return SimWrenchSensor(ctx.cell, ctx.timing)
 
 
 def _ati_wrench(options, ctx: DeviceContext) -> WrenchSensor:
@@ -131,15 +117,15 @@ def _ati_wrench(options, ctx: DeviceContext) -> WrenchSensor:
 
 
 ARM_BACKENDS: dict[str, Backend] = {
-    "sim": Backend(SimArmConfig, _sim_arm),
+    "sim": Backend(simulated.arm_options, simulated.build_arm),
     "val": Backend(ValConfig, _val_arm),
 }
 CAMERA_BACKENDS: dict[str, Backend] = {
-    "sim": Backend(NoOptions, _sim_camera),
+    "sim": Backend(NoOptions, simulated.build_camera),
     "opencv": Backend(OpenCvCameraConfig, _opencv_camera),
 }
 WRENCH_BACKENDS: dict[str, Backend] = {
-    "sim": Backend(NoOptions, _sim_wrench),
+    "sim": Backend(NoOptions, simulated.build_wrench),
     "ati": Backend(AtiConfig, _ati_wrench),
 }
 REGISTRIES = {"arm": ARM_BACKENDS, "camera": CAMERA_BACKENDS, "wrench": WRENCH_BACKENDS}
@@ -162,7 +148,7 @@ def parse_device_section(kind: str, data: Any):
         raise ConfigError(f"{kind}.type: must be one of {' | '.join(registry)}, "
                           f"got {backend_type!r}")
     backend = registry[backend_type]
-    return DeviceSection(backend_type, from_mapping(backend.options, options, kind))
+    return DeviceSection(backend_type, from_mapping(backend.options_type, options, kind))
 
 
 def with_device(config, kind: str, backend_type: str, **options):
@@ -170,13 +156,14 @@ def with_device(config, kind: str, backend_type: str, **options):
 
     ``options`` override that backend's options; the options already configured are kept when
     the backend stays the same. The result is validated as strictly as a config file
-    (ConfigError naming the key).
+    (ConfigError naming the key); a simulated device has the ``scene`` section read.
     """
     section = getattr(config, kind)
     data = to_mapping(section.options) if section.type == backend_type else {}
     data.update(options)
     replaced = parse_device_section(kind, {"type": backend_type, **data})
-    return dataclasses.replace(config, **{kind: replaced})
+    config = dataclasses.replace(config, **{kind: replaced})
+    return simulated.with_scene_read(config) if backend_type == "sim" else config
 
 
 @dataclass

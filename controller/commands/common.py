@@ -8,6 +8,7 @@ import sys
 import time
 from pathlib import Path
 
+from controller import simulated
 from controller.config import cell_part, load_config, with_part
 from controller.loop.iteration_log import IterationLog
 from controller.recording.writer import RunRecorder
@@ -216,9 +217,10 @@ def add_timing_option(parser: argparse.ArgumentParser, default: str | None = "re
 
 
 def run_config_from_args(args):
-    """The config of ``--config`` with ``--timing`` and ``--part`` applied (``--part all``
-    leaves the part to the caller): what evaluate, table1 and demo run on."""
-    config = with_timing(config_from_args(args), args.timing)
+    """The config of ``--config`` with its ``scene`` read, ``--timing`` and ``--part`` applied
+    (``--part all`` leaves the part to the caller): what evaluate, table1 and demo run on, the
+    simulated cell whatever devices the file names."""
+    config = with_timing(simulated.with_scene_read(config_from_args(args)), args.timing)
     part = getattr(args, "part", None)
     return config if part in (None, ALL_PARTS) else with_part(config, part)
 

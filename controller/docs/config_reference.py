@@ -30,6 +30,7 @@ from typing import Any, Literal, Union
 from controller.config import FineposConfig
 from controller.devices import REGISTRIES
 from drivers.core.files import atomic_write_text
+from sim_backend.cell.scene_config import SceneConfig
 
 COMMAND = "finepos docs config --out docs/configuration.md"
 
@@ -239,13 +240,16 @@ def section_keys(section: str) -> Iterator[Key]:
         yield Key(f"{section}.type", choices, "", "", "sim",
                   "The backend; the other keys are that backend's options.")
         for name, backend in registry.items():
-            options = backend.options
+            options = backend.options_type
             if not dataclasses.fields(options):
                 continue
             for key in keys(options, section):
                 yield dataclasses.replace(key, backend=name)
         return
-    hints = typing.get_type_hints(FineposConfig)
+    if section == "scene":  # a SceneConfig where a device is simulated (controller.simulated)
+        yield from keys(SceneConfig, section)
+        return
+    hints = typing.get_type_hints(FineposConfig, localns={"SceneConfig": SceneConfig})
     yield from keys(hints[section], section)
 
 

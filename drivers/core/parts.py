@@ -14,6 +14,7 @@ camera sees it (the image repeats every 360/kappa deg), which is also the period
 from __future__ import annotations
 
 from dataclasses import dataclass
+from typing import Literal
 
 from drivers.core.errors import ConfigError
 
@@ -67,6 +68,10 @@ class Part:
 
 CUBE_EDGE_MM = 30.0
 SCREW_SHANK_RADIUS_MM = 5.5
+
+# A part's name as a config key takes it (``controller.part``, ``scene.object.kind``); keep in
+# step with PARTS (tests/sim_backend/cell/test_scene_config.py checks it).
+PartKind = Literal["cube", "nut", "ledge", "screw"]
 
 PARTS: dict[str, Part] = {
     "cube": Part("cube", kappa=4, grasp_width_mm=CUBE_EDGE_MM, grip_below_top_mm=15.0,

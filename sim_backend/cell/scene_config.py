@@ -14,11 +14,10 @@ from pathlib import Path
 from typing import Literal
 
 from drivers.core.errors import ConfigError
+from drivers.core.parts import PartKind
 from drivers.core.timing import TimingMode
 from drivers.core.typed_config import from_mapping, load_yaml_file
 
-# Keep in step with the parts catalogue, drivers.core.parts.PARTS (a test checks it).
-PartKind = Literal["cube", "nut", "ledge", "screw"]
 TableTexture = Literal["none", "wood", "checker", "noise"]
 LightPreset = Literal["good", "poor", "dim", "side"]
 
