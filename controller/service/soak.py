@@ -61,7 +61,7 @@ import time
 from collections import Counter
 from collections.abc import Callable, Iterator
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 from controller.config import config_from_mapping
 from controller.devices import open_devices
@@ -70,8 +70,9 @@ from controller.service.client import ServiceClient, ServiceError
 from controller.service.service import ITERATION_LOG_NAME, Service
 from drivers.core.files import write_json
 from drivers.core.timing import TimingConfig
-from sim_backend.emulators.cell import CellEmulators
-from sim_backend.emulators.val.server import DEFAULT_GARBAGE, ValFaults
+
+if TYPE_CHECKING:  # the emulators load where a cell is served (served_cell, _inject)
+    from sim_backend.emulators.cell import CellEmulators
 
 logger = logging.getLogger(__name__)
 
@@ -239,6 +240,7 @@ def served_cell(timing: str, seed: int) -> Iterator[CellEmulators]:
     """A new simulated cell served over its emulators (VAL and ATI on TCP, MJPEG stream)."""
     from sim_backend.cell.scene_config import SimArmConfig
     from sim_backend.cell.sim_cell import SimCell  # PyBullet only when a cell is built
+    from sim_backend.emulators.cell import CellEmulators
 
     probe = config_from_mapping({"scene": {"timing": timing}})
     with contextlib.ExitStack() as stack:
@@ -473,6 +475,8 @@ class Soak:
     # -- injecting -------------------------------------------------------------------------
     def _inject(self, fault: str, sock: socket.socket | None) -> None:
         """Wait a random moment into the running job, then inject ``fault``."""
+        from sim_backend.emulators.val.server import DEFAULT_GARBAGE, ValFaults
+
         emulators = self.emulators
         assert emulators is not None and emulators.val is not None
         assert emulators.mjpeg is not None and emulators.ati is not None
@@ -518,6 +522,8 @@ class Soak:
 
     def _clear_knobs(self) -> None:
         """The operator removes every cause (knobs back to normal)."""
+        from sim_backend.emulators.val.server import ValFaults
+
         emulators = self.emulators
         assert emulators is not None and emulators.val is not None
         assert emulators.mjpeg is not None and emulators.ati is not None
