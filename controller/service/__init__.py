@@ -58,6 +58,12 @@ Commands (arguments, types, ranges and defaults in ``commands.COMMANDS``):
   ``{"event": "state", "state": ..., "previous": ..., "reason": ..., "time": ...}``,
   ``{"event": "dropped", "count": N}`` (the client read too slowly; the log file has them all),
   ``{"event": "halt", "ok": ..., "error": ...}`` (a halt that outlived its ``abort``),
+  ``{"event": "job", "job": {...}, "time": ...}`` (a job ended; as ``status`` reports it),
+  ``{"event": "abort", "job": ..., "halted": ..., "seconds": ..., "time": ...}`` (an
+  ``abort`` answered: the job it preempted, whether the arm acknowledged the halt, how long
+  the answer took),
+  ``{"event": "fault", "code": ..., "reason": ..., "devices": {...}, "time": ...}`` (a fault
+  entered or renewed; ``devices``: those not active, with their state),
   ``{"event": "end", ...}`` when the service stops, after every event published before it
   (a client that does not read meanwhile is cut off when the service closes);
 - ``auth`` (``token``): the first request on a TCP connection.
@@ -67,6 +73,9 @@ credentials (SO_PEERCRED, SO_PEERGROUPS) must match the service's own user,
 ``service.allowed_users`` or ``service.allowed_groups``, else it gets one ``unauthorized`` line
 and is disconnected. There is no network listener unless ``service.tcp`` is configured; that one
 binds to loopback only and requires ``auth`` with the token from ``service.tcp.token_file``.
+The metrics port (``service.metrics_port``, off by default) binds to loopback unless
+``service.metrics_address`` names another address; then every scrape must send that token as
+``Authorization: Bearer``.
 
 Load and limits: ``status`` is answered from a snapshot rebuilt only when its inputs change
 (``snapshot``); each connection's answers are paced to ``service.request_rate_hz`` after a burst
@@ -93,6 +102,6 @@ Modules: ``service`` (the Service: state, jobs, control loop), ``server`` and ``
 ``peer`` (who may connect), ``jobs`` and ``model_slot`` (what jobs do), ``job_arm`` (the
 preemptible arm), ``cell_connection`` (devices: open, recover, probe), ``events`` (the stream),
 ``states``, ``backoff``, ``pacing``, ``snapshot``, ``watchdog``, ``sd_notify``, ``signals``,
-``config`` (the ``service:`` config section), ``config_reload``, ``client``, ``bench``
-(``finepos bench service``).
+``config`` (the ``service:`` config section), ``config_reload``, ``client``, ``metrics``
+(Prometheus, ``service.metrics_port``), ``bench`` (``finepos bench service``).
 """

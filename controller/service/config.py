@@ -1,4 +1,5 @@
-"""Config section ``service:``: where the control socket is, who may use it, how faults recover.
+"""Config section ``service:``: where the control socket is, who may use it, how faults recover,
+and where metrics are served.
 
 Loaded strictly like every other section (``drivers.core.typed_config``). User and group names are
 resolved when the service starts (``controller.service.peer``), not at load, so a config can be
@@ -11,6 +12,18 @@ import ipaddress
 from dataclasses import dataclass, field
 
 _POSITIVE = {"min": 0.0, "exclusive_min": True}
+
+
+def is_loopback(address: str, key: str) -> bool:
+    """Whether the IP address ``address`` (config key ``key``) is a loopback address.
+
+    Raises:
+        ValueError: ``address`` is not an IP address (the message names ``key``).
+    """
+    try:
+        return ipaddress.ip_address(address).is_loopback
+    except ValueError as exc:
+        raise ValueError(f"{key}: expected an IP address, got {address!r}") from exc
 
 
 @dataclass(frozen=True)
@@ -28,11 +41,7 @@ class TcpConfig:
     host: str = "127.0.0.1"
 
     def __post_init__(self) -> None:
-        try:
-            loopback = ipaddress.ip_address(self.host).is_loopback
-        except ValueError as exc:
-            raise ValueError(f"host: expected an IP address, got {self.host!r}") from exc
-        if not loopback:
+        if not is_loopback(self.host, "host"):
             raise ValueError(f"host: the TCP listener must be bound to loopback, got {self.host!r}")
         if not self.token_file.strip():
             raise ValueError("token_file: must name the token file")
@@ -71,6 +80,11 @@ class ServiceConfig:
     (``controller.recording``; None: no recordings);
     live_view_port: serve the annotated hand-camera image as MJPEG on 127.0.0.1 at this port
     (``controller.recording.live``; None: off);
+    metrics_port: serve Prometheus metrics (text format) over HTTP at this port
+    (``controller.service.metrics``; None: off);
+    metrics_address: the address the metrics port binds to (an IP address; 127.0.0.1 by
+    default); any other than loopback needs ``service.tcp`` (its token_file), and every scrape
+    then sends ``Authorization: Bearer <token>`` with that token;
     self_check_at_start: at start, move to the taught pose and run the self-check
     (``finepos check``); when it fires the service starts in fault (code ``self_check``) and
     refuses motion until a reset (off by default: it moves the arm at start).
@@ -97,11 +111,16 @@ class ServiceConfig:
     tcp: TcpConfig | None = None
     record_dir: str | None = None
     live_view_port: int | None = field(default=None, metadata={"min": 1, "max": 65535})
+    metrics_port: int | None = field(default=None, metadata={"min": 1, "max": 65535})
+    metrics_address: str = "127.0.0.1"
     self_check_at_start: bool = False
 
     def __post_init__(self) -> None:
         if not self.socket_path.strip():
             raise ValueError("socket_path: must name the control socket")
+        if not is_loopback(self.metrics_address, "metrics_address") and self.tcp is None:
+            raise ValueError(f"metrics_address: {self.metrics_address} is not loopback: that "
+                             "needs service.tcp.token_file (scrapes send its token)")
         if self.reconnect_max_s < self.reconnect_initial_s:
             raise ValueError("reconnect_max_s must be at least reconnect_initial_s, got "
                              f"{self.reconnect_max_s} / {self.reconnect_initial_s}")

@@ -4,7 +4,8 @@ Live: ``safety`` (the arm's limits), ``perception``, ``controller`` (except the 
 file is open, and the state folder, whose lock is held), and in ``service`` the allowed peers,
 the idle poll, the reconnection backoff and the stall and stop timeouts. Everything else is
 fixed by what is open: the devices (``arm``, ``camera``, ``wrench``, and ``scene`` for the
-simulated cell), the log and state folders and the listeners. A reload that changes any of those
+simulated cell), the log and state folders and the listeners (the control socket, the TCP
+port, the metrics port). A reload that changes any of those
 is refused as a whole.
 """
 
@@ -13,7 +14,8 @@ from __future__ import annotations
 RESTART_SECTIONS = ("arm", "camera", "wrench", "scene")
 RESTART_SERVICE_KEYS = ("socket_path", "socket_group", "max_request_bytes", "max_clients", "tcp",
                         "max_clients_per_uid", "max_waiting", "idle_timeout_s",
-                        "request_timeout_s", "request_rate_hz", "request_burst")
+                        "request_timeout_s", "request_rate_hz", "request_burst",
+                        "metrics_port", "metrics_address")
 
 
 def restart_only_changes(old, new) -> list[str]:

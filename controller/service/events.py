@@ -4,13 +4,20 @@ Publishing never blocks the publisher (the control loop writing its iteration lo
 subscriber has a bounded queue; when a slow client lets it fill up, further events are counted
 and the client receives one ``{"event": "dropped", "count": N}`` before the next event it gets.
 The iteration log file on disk has every record regardless.
+
+Listeners (the metrics, ``controller.service.metrics``) are called with every event in the
+publisher's thread, before any subscriber can read it; they only count, so they never block.
 """
 
 from __future__ import annotations
 
+import logging
 import queue
 import threading
+from collections.abc import Callable
 from typing import Any
+
+logger = logging.getLogger(__name__)
 
 QUEUE_EVENTS = 1000
 
@@ -58,7 +65,15 @@ class EventHub:
     def __init__(self, queue_events: int = QUEUE_EVENTS) -> None:
         self._queue_events = queue_events
         self._subscribers: list[Subscription] = []
+        self._listeners: list[Callable[[dict[str, Any]], None]] = []
         self._lock = threading.Lock()
+
+    def add_listener(self, listener: Callable[[dict[str, Any]], None]) -> None:
+        """Call ``listener(event)`` with every event published from now on, in the publisher's
+        thread and before subscribers see it; it must return quickly (an error it raises is
+        logged, never passed to the publisher)."""
+        with self._lock:
+            self._listeners.append(listener)
 
     def subscribe(self) -> Subscription:
         """A new subscription that receives every event published from now on."""
@@ -74,8 +89,14 @@ class EventHub:
                 self._subscribers.remove(subscription)
 
     def publish(self, event: dict[str, Any]) -> None:
-        """Queue ``event`` for every subscriber; never blocks (a full queue drops it)."""
+        """Hand ``event`` to every listener, then queue it for every subscriber; never blocks (a
+        full queue drops it)."""
         with self._lock:
-            subscribers = list(self._subscribers)
+            listeners, subscribers = list(self._listeners), list(self._subscribers)
+        for listener in listeners:
+            try:
+                listener(event)
+            except Exception:  # a listener's bug must not end a job or the control loop
+                logger.exception("event listener failed on a %s event", event.get("event"))
         for subscription in subscribers:
             subscription.put(event)

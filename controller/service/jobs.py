@@ -59,23 +59,27 @@ class Job:
     reason: str = ""
     result: dict[str, Any] | None = None
     seconds: float | None = None
+    on_end: Callable[[Job], None] | None = field(default=None, repr=False)
     _lock: threading.Lock = field(default_factory=threading.Lock, repr=False)
 
     def finish(self, outcome: str, reason: str, result: dict[str, Any] | None = None) -> bool:
-        """Record the end (the first call wins); returns whether this call did."""
+        """Record the end (the first call wins); returns whether this call did. ``on_end`` is
+        called with the job ended, before ``done`` wakes anyone waiting for it."""
         with self._lock:
-            if self.done.is_set():
+            if self.outcome is not None:
                 return False
             self.outcome, self.reason, self.result = outcome, reason, result
             self.seconds = time.time() - self.started_at
+            if self.on_end is not None:
+                self.on_end(self)
             self.done.set()
             return True
 
     def report(self) -> dict[str, Any]:
-        """The job as ``status`` shows it; outcome, reason, result and seconds once it is done."""
+        """The job as ``status`` shows it; outcome, reason, result and seconds once it ended."""
         report = {"id": self.id, "kind": self.kind, "args": self.args,
                   "started_at": self.started_at}
-        if self.done.is_set():
+        if self.outcome is not None:
             report.update(outcome=self.outcome, reason=self.reason, result=self.result,
                           seconds=self.seconds)
         return report

@@ -75,6 +75,12 @@ class PartModels:
             slot = self._slots.get(part)
         return slot.info() if slot is not None else None
 
+    def infos(self) -> dict[str, dict[str, Any] | None]:
+        """What ``status`` reports about each part's model ({part: info or None})."""
+        with self._lock:
+            slots = dict(self._slots)
+        return {part: slot.info() for part, slot in slots.items()}
+
     def marker(self) -> tuple:
         """An object that changes whenever any part's model is replaced."""
         with self._lock:

@@ -100,6 +100,7 @@ class Service:
         self._log: IterationLog | None = None
         self._server: ControlServer | None = None
         self._live_view = None
+        self._metrics_server = None
         self._fp: FinePositioner | None = None
         self._job: Job | None = None
         self._job_thread: threading.Thread | None = None
@@ -145,6 +146,7 @@ class Service:
             logger.info("iteration records go to %s", log_path)
             stack.callback(self._cell.close)
             self._live_view = self._start_live_view(stack)
+            self._start_metrics(stack, token)
             self._server = stack.enter_context(
                 ControlServer(self.socket_path, cfg.service, policy, self, token))
             stack.callback(lambda: self._server.close(self._stop_budget_s(0.6)))
@@ -378,6 +380,8 @@ class Service:
         cell needs a new teach-in; a reset lets the operator start it).
         """
         self._fault = {"code": code, "reason": reason, "since": time.time()}
+        self._hub.publish({"event": "fault", "code": code, "reason": reason,
+                           "devices": self._devices_not_active(), "time": time.time()})
         cfg = self.config.service
         self._backoff = Backoff(cfg.reconnect_initial_s, cfg.reconnect_max_s)
         self._next_reconnect_s = time.monotonic() + self._backoff.next_delay_s()
@@ -387,6 +391,16 @@ class Service:
             self._notifier.status(f"fault: {reason}")
         else:
             self._machine.transition(State.FAULT, reason)
+
+    def _devices_not_active(self) -> dict[str, str]:
+        """The devices that are not active, with their state (``cell: not_open`` when the
+        devices are not open)."""
+        try:
+            named = self._cell.named()
+        except FineposError:  # not open (or closed meanwhile by a job changing parts)
+            return {"cell": "not_open"}
+        return {name: device.state.value for name, device in named
+                if device.state is not Lifecycle.ACTIVE}
 
     # -- config reload (SIGHUP) ----------------------------------------------------------------
     def _reload_if_idle(self) -> None:
@@ -437,6 +451,10 @@ class Service:
         self._notifier.status(f"{new.value}: {reason}")
         self._hub.publish({"event": "state", "state": new.value, "previous": old.value,
                            "reason": reason, "time": time.time()})
+
+    def _on_job_end(self, job: Job) -> None:
+        """A job ended (called before anyone waiting for it wakes)."""
+        self._hub.publish({"event": "job", "job": job.report(), "time": time.time()})
 
     def _on_record(self, record: dict[str, Any]) -> None:
         self._last_iteration = record
@@ -556,7 +574,7 @@ class Service:
                 raise self._refusal(state)
             self._check_job_args(kind, args)
             args = {**args, "part": self._job_part(kind, args["part"])}
-            job = Job(self._next_job_id, kind, args)
+            job = Job(self._next_job_id, kind, args, on_end=self._on_job_end)
             self._next_job_id += 1
             assert self._cell.arm is not None
             self._cell.arm.resume()
@@ -582,6 +600,22 @@ class Service:
         server = stack.enter_context(MjpegServer(live, port=port))
         logger.info("live view on %s", server.stream_url)
         return live
+
+    def _start_metrics(self, stack: contextlib.ExitStack, token: str | None) -> None:
+        """With ``service.metrics_port``: Prometheus metrics fed by the event stream, served on
+        ``service.metrics_address`` by a thread of their own (closed with the service)."""
+        cfg = self.config.service
+        if cfg.metrics_port is None:
+            return
+        from controller.service.metrics import MetricsServer, ServiceMetrics
+
+        metrics = ServiceMetrics(
+            clients=lambda: self._server.client_count if self._server is not None else 0,
+            models=self._models.infos)
+        self._hub.add_listener(metrics.on_event)
+        self._metrics_server = MetricsServer(metrics, cfg.metrics_address, cfg.metrics_port,
+                                             token).start()
+        stack.callback(lambda: self._metrics_server.close(self._stop_budget_s(0.5)))
 
     @contextlib.contextmanager
     def _job_recording(self, job: Job, fp: FinePositioner, failures: list[str]):
@@ -732,6 +766,7 @@ class Service:
         ``halted`` is true only when the arm's controller acknowledged the halt. Otherwise
         ``halt_error`` says why not (the arm disconnected, the devices not open, no reply in
         time, the halt refused) and ``action`` tells the operator to use the teach pendant."""
+        started_s = time.monotonic()
         with self._machine.lock:
             job = self._job
         preempt = job is not None and job.kind != "train"
@@ -751,6 +786,9 @@ class Service:
         if job is not None and not preempt:
             answer["note"] = (f"job {job.id} (train) moves nothing and cannot be interrupted; "
                               "it ends by itself")
+        self._hub.publish({"event": "abort", "job": job.id if preempt else None,
+                           "halted": halt_error is None,
+                           "seconds": time.monotonic() - started_s, "time": time.time()})
         return answer
 
     def reset(self) -> dict[str, Any]:
