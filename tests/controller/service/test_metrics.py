@@ -12,7 +12,9 @@ import pytest
 from prometheus_client.parser import text_string_to_metric_families
 
 from controller.config import config_from_mapping
+from controller.service.listeners import ListenerError
 from controller.service.metrics import ServiceMetrics
+from controller.service.service import Service
 from drivers.core.errors import ConfigError
 from drivers.core.pose import ToolStep
 from tests.mocks.fakes import FakeArm, FakeCamera, FakeWrenchSensor
@@ -114,6 +116,20 @@ def test_a_non_loopback_bind_needs_the_tcp_token(tmp_path, short_dir):
                 _scrape(port, token)
             assert refused.value.code == 401
         assert _scrape(port, TOKEN)[("finepos_control_clients", ())] == 0
+
+
+def test_a_metrics_port_in_use_stops_the_start_with_one_line(tmp_path, short_dir):
+    with socket.socket() as taken:
+        taken.bind(("127.0.0.1", 0))
+        taken.listen()
+        port = taken.getsockname()[1]
+        config = service_config(tmp_path, short_dir, service={"metrics_port": port})
+        service = Service(config, opener=device_opener(FakeArm(), FakeCamera(),
+                                                       FakeWrenchSensor()))
+        with pytest.raises(ListenerError, match=f"service.metrics_port: cannot listen on "
+                                                f"127.0.0.1:{port}: Address already in use"):
+            service.run()
+    assert not service.socket_path.exists()  # refused before the control socket was made
 
 
 def test_grasps_and_faults_are_counted_from_their_events():
