@@ -4,6 +4,11 @@ A module in COMMAND_MODULES is either one subcommand, named after the module, wh
 is its help (first line) and description (``Example:`` line first), with ``add_arguments`` and
 ``run`` (see ``controller.commands.leaves``); or it defines ``register(subparsers)``, which adds
 several subcommands or a group. ``run`` takes the parsed args and returns the exit code.
+
+A cell command (``CELL_COMMAND_MODULES``) builds the parser of its own module alone, so running
+it on a real cell imports neither the simulator nor the lab (the evaluation, the benchmarks,
+the comparisons: tests/test_layout.py and tests/test_product_path.py); ``finepos --help`` and
+every other command build the whole parser.
 """
 
 from __future__ import annotations
@@ -42,12 +47,23 @@ CELL_COMMANDS = ("serve", "ctl", "teach", "acquire", "train", "rezero", "positio
                  "check", "fit-timing", "replay", "sim", "demo")
 RESEARCH_COMMANDS = ("evaluate", "table1", "filter-search", "compare", "grasp-sweep", "bench",
                      "docs")
+# The module behind each command a real cell runs: only it is registered when one of these runs.
+CELL_COMMAND_MODULES = {
+    "serve": "controller.commands.serve",
+    "ctl": "controller.commands.ctl",
+    **dict.fromkeys(("teach", "acquire", "train", "rezero", "position", "grasp"),
+                    "controller.commands.workflow"),
+    "check": "controller.commands.check",
+    "fit-timing": "controller.commands.fit_timing",
+    "replay": "controller.commands.replay",
+}
 
 logger = logging.getLogger("finepos")
 
 
-def build_parser() -> argparse.ArgumentParser:
-    """The ``finepos`` argument parser, with every module in COMMAND_MODULES registered."""
+def build_parser(command: str | None = None) -> argparse.ArgumentParser:
+    """The ``finepos`` argument parser, with every module in COMMAND_MODULES registered; for a
+    cell ``command`` (a key of CELL_COMMAND_MODULES) only the module behind it."""
     parser = argparse.ArgumentParser(
         prog="finepos",
         description="Calibration-free visual fine positioning for a camera-in-hand robot arm.",
@@ -56,7 +72,9 @@ def build_parser() -> argparse.ArgumentParser:
     )
     parser.add_argument("-v", "--verbose", action="store_true", help="debug logging on stderr")
     sub = parser.add_subparsers(dest="command", metavar="COMMAND", required=True)
-    for name in COMMAND_MODULES:
+    names = (CELL_COMMAND_MODULES[command],) if command in CELL_COMMAND_MODULES else \
+        COMMAND_MODULES
+    for name in names:
         module = importlib.import_module(name)
         if hasattr(module, "register"):  # several subcommands, or a group
             module.register(sub)
@@ -118,8 +136,8 @@ def main(argv: list[str] | None = None) -> int:
         SIGTERM (files being written keep their old contents). Bad
         arguments make argparse exit with 2.
     """
-    parser = build_parser()
     argv = sys.argv[1:] if argv is None else list(argv)
+    parser = build_parser(_command_word(argv))
     args = parser.parse_args(argv)
     args.command_line = ["finepos", *argv]  # reports quote the command that made them
     setup_logging(args.verbose)
@@ -149,6 +167,17 @@ def main(argv: list[str] | None = None) -> int:
     finally:
         if previous is not None:
             signal.signal(signal.SIGTERM, previous)
+
+
+def _command_word(argv: list[str]) -> str | None:
+    """The subcommand ``argv`` names (its first word that is not an option); None when there is
+    none or the top-level help comes first."""
+    for arg in argv:
+        if arg in ("-h", "--help"):
+            return None
+        if not arg.startswith("-"):
+            return arg
+    return None
 
 
 class Terminated(BaseException):

@@ -22,7 +22,7 @@ def test_errors_end_in_one_line(monkeypatch, capsys, error, status, text):
 
     args = cli.build_parser().parse_args(["ctl", "status"])
     args.func = failing  # a subcommand that fails the way a full disk or a bug does
-    monkeypatch.setattr(cli, "build_parser", lambda: _Parser(args))
+    monkeypatch.setattr(cli, "build_parser", lambda command=None: _Parser(args))
     assert cli.main(["ctl", "status"]) == status
     err = capsys.readouterr().err.strip().splitlines()
     assert err[-1].startswith(text) and "Traceback" not in "\n".join(err)
@@ -51,7 +51,7 @@ def writing_forever(args):
 
 args = cli.build_parser().parse_args(["ctl", "status"])
 args.func = writing_forever
-cli.build_parser = lambda: type("P", (), {"parse_args": lambda self, argv: args})()
+cli.build_parser = lambda command=None: type("P", (), {"parse_args": lambda self, argv: args})()
 sys.exit(cli.main([]))
 """
 
