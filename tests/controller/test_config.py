@@ -2,7 +2,9 @@
 
 import pytest
 
-from controller.config import config_from_mapping, load_config
+from controller.config import config_from_mapping, load_config, with_part
+from controller.devices import with_device
+from controller.simulated import UnreadScene
 from drivers.core.errors import ConfigError
 
 
@@ -48,6 +50,25 @@ def test_file_errors_name_the_file(tmp_path):
     f.write_text("scene:\n  clutter: {count: 99}\n")
     with pytest.raises(ConfigError, match=r"cell.yaml: scene.clutter.count: must be <= 8"):
         load_config(f)
+
+
+REAL_DEVICES = {"arm": {"type": "val", "port": "loop://"},
+                "wrench": {"type": "ati", "port": "loop://"},
+                "camera": {"type": "opencv", "source": 0}}
+
+
+def test_a_real_cell_leaves_the_scene_to_the_simulator():
+    cfg = config_from_mapping({**REAL_DEVICES, "scene": {"lighting": {"preset": "disco"}}})
+    assert cfg.scene == UnreadScene({"lighting": {"preset": "disco"}})
+    assert with_part(cfg, "nut").controller.part == "nut"
+    # a device made simulated reads the scene, with the same error as at load
+    with pytest.raises(ConfigError, match="scene.lighting.preset: must be one of"):
+        with_device(cfg, "camera", "sim")
+
+
+def test_a_device_made_simulated_reads_the_scene():
+    cfg = config_from_mapping({**REAL_DEVICES, "scene": {"lighting": {"preset": "poor"}}})
+    assert with_device(cfg, "camera", "sim").scene.lighting.preset == "poor"
 
 
 def test_a_partial_nn2_grid_keeps_nn2s_defaults():
