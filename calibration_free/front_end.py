@@ -284,26 +284,30 @@ class FrontEnd:
         check = None
         if image is not None and self.chroma is not None:
             check = colour_check(image, self.chroma, self.chroma_tolerance)
-        found = localise(preprocessed, self.threshold, self.expected_area_px,
-                         polarity=self.polarity, area_tolerance=self.area_tolerance,
-                         max_elongation=self.max_elongation, expected_uv=self.nominal_uv_px,
-                         blob_check=check, image=image, edge=self.edge)
-        if found.status != "no_object" or self.taught_outline_px is None \
-                or self.max_elongation == NO_ELONGATION_LIMIT:
+        found = self._localise_at(preprocessed, image, self.threshold, self.max_elongation,
+                                  check)
+        if found.status != "no_object":
             return found
-        # A part cut by something lying on it is longer for its width than the part (a cube
-        # with a quarter hidden: 1.6 against 1.55 at most in training): a blob of the
-        # expected area, up to CUT_ELONGATION times the trained shape's elongation, is the
-        # part where its outline has something other than the table beyond it.
-        cut = localise(preprocessed, self.threshold, self.expected_area_px,
-                       polarity=self.polarity, area_tolerance=self.area_tolerance,
-                       max_elongation=CUT_ELONGATION * self.max_elongation,
-                       expected_uv=self.nominal_uv_px, blob_check=check, image=image,
-                       edge=self.edge)
-        if cut.ok and cut_share(preprocessed, cut.part_mask, cut.u_px, cut.v_px,
-                                self.threshold) >= MIN_CUT_SHARE:
-            return cut
+        if self.taught_outline_px is not None and self.max_elongation != NO_ELONGATION_LIMIT:
+            # A part cut by something lying on it is longer for its width than the part (a
+            # cube with a quarter hidden: 1.6 against 1.55 at most in training): a blob of the
+            # expected area, up to CUT_ELONGATION times the trained shape's elongation, is the
+            # part where its outline has something other than the table beyond it.
+            cut = self._localise_at(preprocessed, image, self.threshold,
+                                    CUT_ELONGATION * self.max_elongation, check)
+            if cut.ok and cut_share(preprocessed, cut.part_mask, cut.u_px, cut.v_px,
+                                    self.threshold) >= MIN_CUT_SHARE:
+                return cut
         return found
+
+    def _localise_at(self, preprocessed: np.ndarray, image: np.ndarray | None,
+                     threshold: float, max_elongation: float, check) -> Localisation:
+        """``localise`` with what training learned, at ``threshold`` and up to
+        ``max_elongation``."""
+        return localise(preprocessed, threshold, self.expected_area_px, polarity=self.polarity,
+                        area_tolerance=self.area_tolerance, max_elongation=max_elongation,
+                        expected_uv=self.nominal_uv_px, blob_check=check, image=image,
+                        edge=self.edge)
 
     def locate(self, image: np.ndarray) -> tuple[np.ndarray, Localisation]:
         """``preprocess`` then ``localise``: one frame's preprocessed image and the object.
