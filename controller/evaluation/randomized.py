@@ -218,14 +218,17 @@ def _hue_name(rgb) -> str:
     return ("red", "yellow", "green", "cyan", "blue", "magenta")[int((hue + 0.5) % 6)]
 
 
-def draw_trial(rng: np.random.Generator, seed: int) -> TrialDraw:
-    """A trial's light, card and clutter."""
+def draw_trial(rng: np.random.Generator, seed: int, train_brightness: float) -> TrialDraw:
+    """A trial's light, card and clutter on a cell taught under a light of
+    ``train_brightness`` (the factors' ``light_change``: |log2| of the brightness ratio)."""
     light, factors = draw_light(rng)
     coverage = float(rng.uniform(*OCCLUDER_RANGE))
     clutter = int(rng.integers(CLUTTER_RANGE[0], CLUTTER_RANGE[1] + 1))
     coverage = coverage if coverage >= OCCLUDER_MIN else 0.0
+    change = abs(math.log2(factors["brightness"] / train_brightness))
     return TrialDraw(seed, light, coverage, clutter,
-                     {**factors, "occluder": coverage, "clutter": clutter})
+                     {**factors, "light_change": change, "occluder": coverage,
+                      "clutter": clutter})
 
 
 def cell_config(config, cell: CellDraw, light: LightingConfig, occluder: float = 0.0,
@@ -343,7 +346,8 @@ def draw_plan(config, *, trials: int, seed: int, trials_per_cell: int
         draws = []
         for t_seq in trials_part.spawn(count):
             t_rng = np.random.default_rng(t_seq)
-            draws.append(draw_trial(t_rng, int(t_rng.integers(2**31))))
+            draws.append(draw_trial(t_rng, int(t_rng.integers(2**31)),
+                                    cell.factors["train_light"]["brightness"]))
         plan.append((cell, tuple(draws)))
     return plan
 
@@ -476,20 +480,14 @@ _FACTORS = {
 
 def by_factor(records: list[dict], cells: list[dict]) -> dict:
     """For each drawn factor, one row per class: trials, safe within 2.5 loops (Wilson
-    interval) and RMS after 2.5 loops. ``light_change``: the trial's brightness against the
-    training light's, as |log2| of their ratio."""
+    interval) and RMS after 2.5 loops."""
     by_cell = {c["index"]: c for c in cells}
     out: dict[str, list[dict]] = {}
     for name, (where, key, classify) in _FACTORS.items():
         groups: dict[str, list[dict]] = {}
         for r in records:
-            if name == "light_change":
-                train = by_cell[r["cell"]]["train_light"]["brightness"]
-                value = abs(math.log2(r["draw"]["brightness"] / train))
-            else:
-                source = {"cell": by_cell[r["cell"]], "trial": r["draw"],
-                          "visible": {"visible": _visible(r)}}[where]
-                value = source[key]
-            groups.setdefault(classify(value), []).append(r)
+            source = {"cell": by_cell[r["cell"]], "trial": r["draw"],
+                      "visible": {"visible": _visible(r)}}[where]
+            groups.setdefault(classify(source[key]), []).append(r)
         out[name] = [{"class": k, **_rates(v)} for k, v in sorted(groups.items())]
     return out

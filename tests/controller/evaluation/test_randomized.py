@@ -43,13 +43,17 @@ def test_trials_are_dealt_to_cells_and_draws_stay_in_their_ranges():
                 assert all(2700.0 <= lamp["kelvin"] <= 6500.0 for lamp in lamps)
                 assert 0.0 <= trial.occluder <= 0.3 and 0 <= trial.clutter <= 3
                 assert trial.light.direction[2] > 0
+                train = f["train_light"]["brightness"]
+                assert trial.factors["light_change"] == pytest.approx(
+                    abs(np.log2(trial.factors["brightness"] / train)))
 
 
 def _record(cell, visible, outcome, error, lamps=1, brightness=0.5):
     safe = error is not None and np.hypot(error[0], error[1]) <= 2.0 and abs(error[2]) <= 5.0
     return {"cell": cell, "visible": visible, "outcome": outcome, "error": error,
             "safe_2.5": bool(safe), "grasped": None,
-            "draw": {"lamps": lamps, "brightness": brightness, "key_elevation_deg": 50.0,
+            "draw": {"lamps": lamps, "brightness": brightness, "light_change": 0.0,
+                     "key_elevation_deg": 50.0,
                      "key_kelvin": 4000.0, "key_shadow": 0.5, "occluder": 0.0, "clutter": 0}}
 
 
