@@ -228,6 +228,7 @@ class SimCell:
         for item in self._items():
             self._labels[item.body_id] = item.label
         self._shadow_map = ShadowMap(cid, self._table_id)
+        self._shaded: tuple[bytes, np.ndarray] | None = None  # the last scene's samples
         self._held: np.ndarray | None = None  # the part in the tool frame while held
         self._gripping = False  # jaws closed on the part, its hold not yet tested by a lift
         self._motion_dir: np.ndarray | None = None  # of the tool's last move (contact drag)
@@ -756,12 +757,20 @@ class SimCell:
         Each sample is shaded, its cast shadow included, before a pixel integrates the light
         of its samples (``optics.integrate_samples``): a pixel on the part's outline holds
         the part's light and the table's, each as lit where it lies. Each further lamp of the
-        light is shaded and shadowed in a pass of its own, and the passes add up."""
-        rgb, depth, seg = self._render_samples()
-        rgb = self._shadowed(rgb, depth, seg, self.light)
-        for lamp in self.light.lamps:
-            more = self._shadowed(self._render_samples(lamp)[0], depth, seg, lamp)
-            rgb = np.minimum(rgb.astype(np.uint16) + more, 255).astype(np.uint8)
+        light is shaded and shadowed in a pass of its own, and the passes add up. Frames of a
+        scene that has not changed since the last one (the arm, the part, the fingers, the
+        light and the mount where they were) reuse its shaded samples; only the sensor's
+        noise and exposure are new."""
+        key = self._scene_key()
+        if self._shaded is not None and self._shaded[0] == key:
+            rgb = self._shaded[1]
+        else:
+            rgb, depth, seg = self._render_samples()
+            rgb = self._shadowed(rgb, depth, seg, self.light)
+            for lamp in self.light.lamps:
+                more = self._shadowed(self._render_samples(lamp)[0], depth, seg, lamp)
+                rgb = np.minimum(rgb.astype(np.uint16) + more, 255).astype(np.uint8)
+            self._shaded = (key, rgb)
         if self._optics is not None:
             return self._optics.process_light(
                 optics.integrate_samples(rgb, self.camera_model.pixel_samples), noisy)
@@ -770,6 +779,18 @@ class SimCell:
             noise = self._noise_rng.standard_normal(rgb.shape, dtype=np.float32) * std
             rgb = np.clip(rgb + noise + 0.5, 0, 255).astype(np.uint8)
         return np.ascontiguousarray(rgb)
+
+    def _scene_key(self) -> bytes:
+        """What a render depends on: the arm's true joints and tool, the part's pose and the
+        fingers' in the physics (they move while the jaws close and hold), the light and the
+        camera's mount."""
+        position, orientation = p.getBasePositionAndOrientation(self._part.body_id,
+                                                                physicsClientId=self._client)
+        fingers = [state[0] for state in p.getJointStates(
+            self._robot.body_id, list(FINGER_LINKS), physicsClientId=self._client)]
+        return b"".join((self._q_true.tobytes(), self._tool_true.tobytes(),
+                         np.asarray((*position, *orientation, *fingers)).tobytes(),
+                         repr((self._finger_offset_mm, self.light, self._mount)).encode()))
 
     def _shadowed(self, rgb: np.ndarray, depth: np.ndarray, seg: np.ndarray,
                   light: Light) -> np.ndarray:

@@ -353,3 +353,28 @@ def test_close_is_idempotent():
     c.close()
     c.close()
     assert not c.is_open
+
+
+def test_frames_of_an_unchanged_scene_are_the_ones_a_fresh_render_gives():
+    """Reused shaded samples give exactly the frames fresh renders give: over moves, a light
+    change and the jaws closing and opening (the noise sequence included)."""
+    def frames(reuse: bool) -> list[np.ndarray]:
+        out = []
+        with SimCell(SceneConfig(), seed=3) as c:
+            if not reuse:
+                c._scene_key = object  # a key that never matches the last one
+            nominal = c.nominal_grasp_pose()
+            for step in (ToolStep(3, -2, 0, 5), ToolStep(0, 0, 0, 0)):
+                c.move_arm(nominal.moved_in_tool_frame(step))
+                out += [c.render(), c.render()]
+            c.set_lighting("poor")
+            out += [c.render(), c.render()]
+            c.move_arm(nominal)
+            c.close_gripper()
+            out += [c.render()]
+            c.open_gripper()
+            out += [c.render()]
+        return out
+
+    for fresh, reused in zip(frames(False), frames(True), strict=True):
+        assert np.array_equal(fresh, reused)
