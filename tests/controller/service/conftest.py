@@ -86,6 +86,24 @@ def service_config(tmp_path: Path, socket_dir: Path, **sections):
     return config_from_mapping(data, "<test>")
 
 
+TOKEN = "s3cret-token-0123456789"  # the TCP control token the tests' services accept
+
+
+def free_port() -> int:
+    """A TCP port on 127.0.0.1 that nothing listens on now."""
+    with socket.socket() as probe:
+        probe.bind(("127.0.0.1", 0))
+        return probe.getsockname()[1]
+
+
+def token_file(tmp_path: Path) -> Path:
+    """A token file holding ``TOKEN``, readable by its owner only (as the service asks)."""
+    path = tmp_path / "token"
+    path.write_text(f"{TOKEN}\n")
+    path.chmod(0o600)
+    return path
+
+
 def device_opener(arm, camera, wrench, cell=None) -> Callable:
     """An opener (like controller.devices.open_devices) serving these device objects."""
 

@@ -39,9 +39,11 @@ from tests.controller.service.conftest import (
     copy_state,
     cube_view,
     device_opener,
+    free_port,
     next_state_event,
     running_service,
     service_config,
+    token_file,
     wait_for_state,
 )
 from tests.mocks.fakes import FakeArm, FakeCamera, FakeWrenchSensor
@@ -304,14 +306,9 @@ def probe_trickling_tcp_peers(tmp_path, short_dir, monkeypatch):
     from controller.service import connection
 
     monkeypatch.setattr(connection, "AUTH_TIMEOUT_S", 1.0)
-    token_file = tmp_path / "token"
-    token_file.write_text("s3cret-token-0123456789\n")
-    token_file.chmod(0o600)
-    with socket.socket() as probe:
-        probe.bind(("127.0.0.1", 0))
-        port = probe.getsockname()[1]
+    tokens, port = token_file(tmp_path), free_port()
     config = service_config(tmp_path, short_dir, service={
-        "max_clients": 4, "tcp": {"port": port, "token_file": str(token_file)}})
+        "max_clients": 4, "tcp": {"port": port, "token_file": str(tokens)}})
     opener = device_opener(FakeArm(), FakeCamera(), FakeWrenchSensor())
     hostile = []
     with running_service(config, opener) as service:

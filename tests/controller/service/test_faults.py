@@ -5,6 +5,7 @@ cause is gone. Also: a force guard tripping, a lost object, an abort, an idle li
 
 from __future__ import annotations
 
+import contextlib
 import threading
 from pathlib import Path
 
@@ -93,15 +94,27 @@ def test_val_link_fault_refuses_motion_until_reset(tmp_path, short_dir, backing,
         assert len(backing.moves) > moves
 
 
-def test_lost_link_while_idle_is_noticed_and_reconnected_with_backoff(
-        tmp_path, short_dir, backing, notify_socket):
+@contextlib.contextmanager
+def _link_dropped_while_idle(tmp_path, short_dir, backing, notify_socket):
+    """A service on the VAL emulator over TCP, polling the idle arm every 50 ms, whose link
+    then closes every connection: yields the emulator and a client."""
     config = service_config(tmp_path, short_dir, service={"idle_poll_s": 0.05})
     notifier = Notifier({"NOTIFY_SOCKET": str(notify_socket.path)})
-    with ValEmulator(backing, tcp_port=0) as emulator, \
-            running_service(config, device_opener(val_arm(emulator.url), FakeCamera(),
-                                                  FakeWrenchSensor()), notifier) as service, \
-            client_for(service) as client:
-        emulator.set_faults(ValFaults(drop_link_after_lines=0))  # TCP: every connection closed
+    try:
+        with ValEmulator(backing, tcp_port=0) as emulator, \
+                running_service(config, device_opener(val_arm(emulator.url), FakeCamera(),
+                                                      FakeWrenchSensor()), notifier) as service, \
+                client_for(service) as client:
+            emulator.set_faults(ValFaults(drop_link_after_lines=0))  # every connection closed
+            yield emulator, client
+    finally:
+        notifier.close()
+
+
+def test_lost_link_while_idle_is_noticed_and_reconnected_with_backoff(
+        tmp_path, short_dir, backing, notify_socket):
+    with _link_dropped_while_idle(tmp_path, short_dir, backing, notify_socket) as (
+            emulator, client):
         notify_socket.wait_for(lambda m: m.startswith("STATUS=fault: arm check while idle"))
         notify_socket.wait_for(lambda m: "reconnect attempt" in m)
         emulator.set_faults(ValFaults())
@@ -110,24 +123,17 @@ def test_lost_link_while_idle_is_noticed_and_reconnected_with_backoff(
         assert fault["reconnected"] and fault["reconnect_attempts"] >= 2
         assert client.call("status")["state"] == "fault", "resuming needs a reset"
         assert client.call("reset")["state"] == "idle"
-    notifier.close()
 
 
 def test_abort_with_the_arm_disconnected_says_no_halt_reached_it(tmp_path, short_dir, backing,
                                                                   notify_socket):
-    config = service_config(tmp_path, short_dir, service={"idle_poll_s": 0.05})
-    notifier = Notifier({"NOTIFY_SOCKET": str(notify_socket.path)})
-    with ValEmulator(backing, tcp_port=0) as emulator, \
-            running_service(config, device_opener(val_arm(emulator.url), FakeCamera(),
-                                                  FakeWrenchSensor()), notifier) as service, \
-            client_for(service) as client:
-        emulator.set_faults(ValFaults(drop_link_after_lines=0))  # TCP: every connection closed
+    with _link_dropped_while_idle(tmp_path, short_dir, backing, notify_socket) as (
+            emulator, client):
         notify_socket.wait_for(lambda m: "reconnect attempt" in m)  # its connect failed
         assert client.call("status")["fault"]["devices"]["arm"] == "disconnected"
         answer = client.call("abort")
         assert answer["halted"] is False and "disconnected" in answer["halt_error"]
         assert "teach pendant" in answer["action"]
-    notifier.close()
 
 
 @pytest.fixture

@@ -17,8 +17,10 @@ from tests.controller.service.conftest import (
     EVENT_TIMEOUT_S,
     client_for,
     device_opener,
+    free_port,
     running_service,
     service_config,
+    token_file,
 )
 from tests.mocks.fakes import FakeArm, FakeCamera, FakeWrenchSensor
 
@@ -162,20 +164,15 @@ def test_abort_is_obeyed_with_every_waiting_place_taken(tmp_path, short_dir, fak
 
 
 def test_unauthenticated_tcp_peers_cannot_lock_out_the_token_holder(tmp_path, short_dir, fakes):
-    token_file = tmp_path / "token"
-    token_file.write_text("s3cret-token-0123456789\n")
-    token_file.chmod(0o600)
-    with socket.socket() as probe:
-        probe.bind(("127.0.0.1", 0))
-        port = probe.getsockname()[1]
+    tokens, port = token_file(tmp_path), free_port()
     config = service_config(tmp_path, short_dir, service={
-        "tcp": {"port": port, "token_file": str(token_file)}})
+        "tcp": {"port": port, "token_file": str(tokens)}})
     with running_service(config, device_opener(*fakes)):
         silent = [socket.create_connection(("127.0.0.1", port)) for _ in range(2 * 4)]
         try:
             for _ in range(10):
                 silent.append(socket.create_connection(("127.0.0.1", port)))
-                with ServiceClient(tcp=("127.0.0.1", port), token=read_token(token_file),
+                with ServiceClient(tcp=("127.0.0.1", port), token=read_token(tokens),
                                    timeout_s=EVENT_TIMEOUT_S) as operator:
                     assert operator.call("abort")["halted"] is True
         finally:

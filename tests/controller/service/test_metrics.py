@@ -21,22 +21,17 @@ from tests.mocks.fakes import FakeArm, FakeCamera, FakeWrenchSensor
 
 from .conftest import (
     EVENT_TIMEOUT_S,
+    TOKEN,
     client_for,
     copy_state,
     cube_view,
     device_opener,
+    free_port,
     running_service,
     service_config,
+    token_file,
 )
 from .test_faults import NOMINAL
-
-TOKEN = "s3cret-token-0123456789"
-
-
-def _free_port() -> int:
-    with socket.socket() as s:
-        s.bind(("127.0.0.1", 0))
-        return s.getsockname()[1]
 
 
 def _samples(text: str) -> dict[tuple[str, tuple], float]:
@@ -54,7 +49,7 @@ def _scrape(port: int, token: str | None = None) -> dict[tuple[str, tuple], floa
 
 
 def test_a_position_job_is_scraped_during_and_after_it(tmp_path, short_dir, cube_model_files):
-    port = _free_port()
+    port = free_port()
     config = service_config(tmp_path, short_dir, service={"metrics_port": port})
     copy_state(cube_model_files, config)
     arm = FakeArm(start=NOMINAL.moved_in_tool_frame(ToolStep(-3.0, 2.0, 0.0, -8.0)))
@@ -103,13 +98,10 @@ def test_a_non_loopback_bind_needs_the_tcp_token(tmp_path, short_dir):
     with pytest.raises(ConfigError, match="metrics_address: expected an IP address"):
         config_from_mapping({"service": {"metrics_address": "localhost"}}, "<test>")
 
-    token_file = tmp_path / "token"
-    token_file.write_text(f"{TOKEN}\n")
-    token_file.chmod(0o600)
-    port = _free_port()
+    port = free_port()
     config = service_config(tmp_path, short_dir, service={
         "metrics_port": port, "metrics_address": "0.0.0.0",
-        "tcp": {"port": _free_port(), "token_file": str(token_file)}})
+        "tcp": {"port": free_port(), "token_file": str(token_file(tmp_path))}})
     with running_service(config, device_opener(FakeArm(), FakeCamera(), FakeWrenchSensor())):
         for token in (None, "wrong-token-0123456789"):
             with pytest.raises(urllib.error.HTTPError) as refused:
