@@ -2,6 +2,7 @@
 
 import dataclasses
 import json
+from pathlib import Path
 
 import cv2
 import numpy as np
@@ -368,3 +369,19 @@ def test_replay_onto_a_full_disk_exits_non_zero_and_leaves_no_file(tmp_path, tin
         err = capsys.readouterr().err.strip().splitlines()
         assert len(err) == 1 and name in err[0] and "internal error" not in err[0], err
         assert list(tiny_disk.iterdir()) == []
+
+
+# -- recordings in the JSON Schema layout (channels with message encoding json) ----------------
+JSON_LAYOUT = Path(__file__).parent / "data" / "jsonschema-recording.mcap"
+
+
+def test_a_recording_in_the_json_schema_layout_replays(tmp_path, capsys):
+    """data/jsonschema-recording.mcap: the three-look run of test_writer's ``_run`` (FakeCamera,
+    scripted estimator), written with JSON-encoded channels and JSON Schema schemas."""
+    looks = read_looks(JSON_LAYOUT)
+    assert [look.record["loop_kind"] for look in looks] == ["half", "full", "check"]
+    assert looks[0].image.shape == (144, 192, 3)
+    assert looks[0].overlay.centre_px == pytest.approx((96.0, 72.0))
+    assert main(["replay", str(JSON_LAYOUT), "--out", str(tmp_path / "old.mp4")]) == 0
+    assert '"looks": 3' in capsys.readouterr().out
+    assert len(_decoded_frames(tmp_path / "old.mp4")) == 3
