@@ -1,1 +1,1 @@
-"""Run recordings (MCAP with Foxglove's schemas) and their replay as video or contact sheet."""
+"""Run recordings (MCAP through the Foxglove SDK) and their replay as video or contact sheet."""

@@ -25,7 +25,8 @@ from calibration_free.bench import single_core
 from calibration_free.gabor import GaborConfig
 from calibration_free.synthetic import SyntheticCell, render
 from controller.loop.record import IterationRecord
-from controller.recording.writer import IMAGE_FORMATS, RunRecorder
+from controller.recording.channels import IMAGE_FORMATS
+from controller.recording.writer import RunRecorder
 from controller.systems.estimator import TranslationEstimate
 from drivers.core.errors import ConfigError
 from drivers.core.files import write_json

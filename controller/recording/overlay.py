@@ -23,6 +23,16 @@ from typing import Any
 
 import cv2
 import numpy as np
+from foxglove.messages import (
+    CircleAnnotation,
+    Color,
+    ImageAnnotations,
+    Point2,
+    PointsAnnotation,
+    PointsAnnotationType,
+    TextAnnotation,
+    Timestamp,
+)
 
 from controller.loop.record import IterationRecord
 from controller.systems.estimator import TranslationEstimate
@@ -122,13 +132,13 @@ def overlay_of(record: IterationRecord, estimate: TranslationEstimate,
 
 
 # -- Foxglove ImageAnnotations ---------------------------------------------------------------
-def _colour(name: str, alpha: float = 1.0) -> dict[str, float]:
+def _colour(name: str, alpha: float = 1.0) -> Color:
     r, g, b = COLOURS[name]
-    return {"r": r, "g": g, "b": b, "a": alpha}
+    return Color(r=r, g=g, b=b, a=alpha)
 
 
-def _pt(p: Point) -> dict[str, float]:
-    return {"x": p[0] + 0.5, "y": p[1] + 0.5}  # pixel-centre -> edge coordinates
+def _pt(p: Point) -> Point2:
+    return Point2(x=float(p[0]) + 0.5, y=float(p[1]) + 0.5)  # pixel-centre -> edge coordinates
 
 
 def _square(cx: float, cy: float, side: float) -> list[Point]:
@@ -136,38 +146,41 @@ def _square(cx: float, cy: float, side: float) -> list[Point]:
     return [(cx - h, cy - h), (cx + h, cy - h), (cx + h, cy + h), (cx - h, cy + h)]
 
 
-def to_annotations(overlay: Overlay, stamp: dict[str, int], texts: list[str] = ()) \
-        -> dict[str, Any]:
-    """The overlay as a ``foxglove.ImageAnnotations`` message (JSON encoding).
+def to_annotations(overlay: Overlay, stamp: Timestamp, texts: list[str] = ()) \
+        -> ImageAnnotations:
+    """The overlay as a ``foxglove.ImageAnnotations`` message stamped ``stamp``.
 
     The centre is the first circle; ``texts`` are stacked at the image's top left.
     """
     circles, points = [], []
-    transparent = {"r": 0.0, "g": 0.0, "b": 0.0, "a": 0.0}
+    transparent = Color(r=0.0, g=0.0, b=0.0, a=0.0)
 
-    def loop(name: str, corners: list[Point]) -> None:
-        points.append({"timestamp": stamp, "type": 2, "points": [_pt(p) for p in corners],
-                       "outline_color": _colour(name), "outline_colors": [],
-                       "fill_color": transparent, "thickness": 1.0})
+    def polyline(kind: PointsAnnotationType, corners: list[Point], colour: str,
+                 thickness: float, fill: Color = transparent) -> None:
+        points.append(PointsAnnotation(timestamp=stamp, type=kind,
+                                       points=[_pt(p) for p in corners],
+                                       outline_color=_colour(colour), fill_color=fill,
+                                       thickness=thickness))
 
     if overlay.centre_px is not None:
-        circles.append({"timestamp": stamp, "position": _pt(overlay.centre_px),
-                        "diameter": 4.0, "thickness": 1.5, "fill_color": _colour("centre"),
-                        "outline_color": _colour("centre")})
+        circles.append(CircleAnnotation(timestamp=stamp, position=_pt(overlay.centre_px),
+                                        diameter=4.0, thickness=1.5,
+                                        fill_color=_colour("centre"),
+                                        outline_color=_colour("centre")))
     if overlay.box_px is not None:
         u0, v0, u1, v1 = overlay.box_px
-        loop("box", [(u0, v0), (u1, v0), (u1, v1), (u0, v1)])
+        polyline(PointsAnnotationType.LineLoop, [(u0, v0), (u1, v0), (u1, v1), (u0, v1)],
+                 "box", 1.0)
     if overlay.roi_px is not None and overlay.centre_px is not None:
-        loop("roi", _square(*overlay.centre_px, overlay.roi_px))
+        polyline(PointsAnnotationType.LineLoop, _square(*overlay.centre_px, overlay.roi_px),
+                 "roi", 1.0)
     if overlay.gabor_px:
-        points.append({"timestamp": stamp, "type": 1,
-                       "points": [_pt(p) for p in overlay.gabor_px],
-                       "outline_color": _colour("gabor"), "outline_colors": [],
-                       "fill_color": _colour("gabor"), "thickness": 3.0})
+        polyline(PointsAnnotationType.Points, list(overlay.gabor_px), "gabor", 3.0,
+                 _colour("gabor"))
     if overlay.taught_px is not None:
-        circles.append({"timestamp": stamp, "position": _pt(overlay.taught_px),
-                        "diameter": 8.0, "thickness": 1.0, "fill_color": transparent,
-                        "outline_color": _colour("taught")})
+        circles.append(CircleAnnotation(timestamp=stamp, position=_pt(overlay.taught_px),
+                                        diameter=8.0, thickness=1.0, fill_color=transparent,
+                                        outline_color=_colour("taught")))
     if overlay.arrow_px is not None:
         (u0, v0), (u1, v1) = overlay.arrow_px
         length = math.hypot(u1 - u0, v1 - v0)
@@ -177,14 +190,13 @@ def to_annotations(overlay: Overlay, stamp: dict[str, int], texts: list[str] = (
             for turn in (0.5, -0.5):
                 c, s = math.cos(turn), math.sin(turn)
                 segments += [(u1, v1), (u1 + c * bu - s * bv, v1 + s * bu + c * bv)]
-        points.append({"timestamp": stamp, "type": 4, "points": [_pt(p) for p in segments],
-                       "outline_color": _colour("step"), "outline_colors": [],
-                       "fill_color": transparent, "thickness": 1.5})
-    return {"circles": circles, "points": points,
-            "texts": [{"timestamp": stamp, "position": {"x": 2.0, "y": 10.0 + 10.0 * i},
-                       "text": text, "font_size": 9.0, "text_color": _colour("taught"),
-                       "background_color": {"r": 0.0, "g": 0.0, "b": 0.0, "a": 0.6}}
-                      for i, text in enumerate(texts)]}
+        polyline(PointsAnnotationType.LineList, segments, "step", 1.5)
+    return ImageAnnotations(
+        circles=circles, points=points,
+        texts=[TextAnnotation(timestamp=stamp, position=Point2(x=2.0, y=10.0 + 10.0 * i),
+                              text=text, font_size=9.0, text_color=_colour("taught"),
+                              background_color=Color(r=0.0, g=0.0, b=0.0, a=0.6))
+               for i, text in enumerate(texts)])
 
 
 # -- drawing (replay, live view) -------------------------------------------------------------

@@ -1,8 +1,11 @@
 """Replay a run recording: its looks with their overlays, as a video and as a contact sheet.
 
 ``read_looks`` pairs each recorded frame with its iteration record (same log time);
-``write_video`` writes one frame per look (MP4, ``mp4v``; ``hold_s`` repeats each so a player
-shows it long enough to read); ``write_sheet`` tiles the looks in a grid, in order.
+Both layouts a recording may have are read: images as protobuf ``foxglove.CompressedImage``
+(what ``RunRecorder`` writes through the Foxglove SDK) or as its JSON encoding (a JSON Schema
+layout), and iteration records as JSON. ``write_video`` writes one frame per look (MP4,
+``mp4v``; ``hold_s`` repeats each so a player shows it long enough to read); ``write_sheet``
+tiles the looks in a grid, in order.
 
 A recording is input from outside: it is opened without blocking (a FIFO or device is refused),
 each frame's size is read from its JPEG or PNG header before it is decoded, and every value
@@ -30,9 +33,9 @@ import cv2
 import numpy as np
 from mcap.reader import make_reader
 
-from controller.recording import schemas
+from controller.recording import protobuf
+from controller.recording.channels import IMAGE_TOPIC, ITERATION_TOPIC, RecordingError
 from controller.recording.overlay import Overlay, draw, look_texts
-from controller.recording.writer import RecordingError
 from drivers.core.files import atomic_write_bytes
 
 MAX_FRAME_SIDE_PX = 4096  # a frame's width or height, read from its header before decoding
@@ -85,11 +88,10 @@ def read_looks(path: str | Path) -> list[Look]:
         with _open_regular(path) as f:
             reader = make_reader(f)
             for _, channel, message in reader.iter_messages(
-                    topics=[schemas.IMAGE_TOPIC, schemas.ITERATION_TOPIC]):
+                    topics=[IMAGE_TOPIC, ITERATION_TOPIC]):
                 where = f"the {channel.topic} message at {message.log_time} ns"
-                body = json.loads(message.data)
-                if channel.topic == schemas.IMAGE_TOPIC:
-                    data = _frame_bytes(body)
+                if channel.topic == IMAGE_TOPIC:
+                    data, image_format = _frame(channel.message_encoding, message.data)
                     size = _frame_size(data)
                     if first_size is not None and size != first_size:
                         raise _Bad(f"a {size[0]}x{size[1]} frame in a recording of "
@@ -100,10 +102,10 @@ def read_looks(path: str | Path) -> list[Look]:
                         raise _Bad(f"the frames exceed {MAX_FRAMES_PX} pixels together")
                     bgr = cv2.imdecode(np.frombuffer(data, np.uint8), cv2.IMREAD_COLOR)
                     if bgr is None or bgr.shape[1::-1] != size:
-                        raise _Bad(f"the {body.get('format')} frame does not decode")
+                        raise _Bad(f"the {image_format} frame does not decode")
                     images[message.log_time] = cv2.cvtColor(bgr, cv2.COLOR_BGR2RGB)
                 else:
-                    records[message.log_time] = _checked_record(body)
+                    records[message.log_time] = _checked_record(json.loads(message.data))
     except FileNotFoundError:
         raise RecordingError(f"{path}: no such recording (record one with "
                              "'finepos position --record FILE.mcap')") from None
@@ -137,12 +139,22 @@ def _open_regular(path: Path):
         yield f
 
 
-def _frame_bytes(body: Any) -> bytes:
-    """The encoded frame of an image message (``foxglove.CompressedImage``)."""
+def _frame(encoding: str, data: bytes) -> tuple[bytes, str]:
+    """The encoded frame and its format of a ``foxglove.CompressedImage`` message, in either of
+    its encodings: ``protobuf`` (the Foxglove SDK's) or ``json`` (the frame base64 in
+    ``data``)."""
+    if encoding == "protobuf":
+        try:
+            return protobuf.compressed_image(data)
+        except ValueError as exc:
+            raise _Bad(f"not a foxglove.CompressedImage: {exc}") from None
+    if encoding != "json":
+        raise _Bad(f"an image in the unknown message encoding {_show(encoding)}")
+    body = json.loads(data)
     if not isinstance(body, dict) or not isinstance(body.get("data"), str):
         raise _Bad("expected an object with the frame as a base64 string in 'data'")
     try:
-        return base64.b64decode(body["data"], validate=True)
+        return base64.b64decode(body["data"], validate=True), str(body.get("format"))
     except binascii.Error:
         raise _Bad("'data' is not base64") from None
 

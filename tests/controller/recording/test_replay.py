@@ -14,8 +14,9 @@ from controller.config import load_config
 from controller.devices import open_devices
 from controller.fine_positioner import FinePositioner
 from controller.loop.positioning import PositioningLoop
+from controller.recording.channels import RecordingError
 from controller.recording.replay import read_looks, write_sheet, write_video
-from controller.recording.writer import RecordingError, RunRecorder
+from controller.recording.writer import RunRecorder
 from controller.systems.registry import SYSTEMS
 from controller.teach.cell_state import CellState
 from drivers.core.pose import Pose, ToolStep
@@ -172,12 +173,12 @@ def _record(**fields) -> dict:
                         "arrow_px": [[16.0, 12.0], [17.0, 13.0]]}, **fields}
 
 
-def _write_recording(path, looks) -> None:
+def _write_recording(path, looks, image_encoding: str = "json") -> None:
     """A recording of ``looks``: (image message body, iteration record body) pairs, either
-    given as raw bytes or as JSON-able values."""
+    given as raw bytes or as JSON-able values; the images in ``image_encoding``."""
     from mcap.writer import Writer
 
-    from controller.recording import schemas
+    from controller.recording.channels import IMAGE_TOPIC, ITERATION_TOPIC
 
     def data(body) -> bytes:
         return body if isinstance(body, bytes) else json.dumps(body).encode()
@@ -186,15 +187,17 @@ def _write_recording(path, looks) -> None:
         writer = Writer(f)
         writer.start()
         channels = {}
-        for topic in (schemas.IMAGE_TOPIC, schemas.ITERATION_TOPIC):
-            name, schema = schemas.CHANNELS[topic]
-            schema_id = writer.register_schema(name=name, encoding="jsonschema",
-                                               data=json.dumps(schema).encode())
-            channels[topic] = writer.register_channel(topic=topic, message_encoding="json",
+        for topic, name, encoding in (
+                (IMAGE_TOPIC, "foxglove.CompressedImage", image_encoding),
+                (ITERATION_TOPIC, "finepos.IterationRecord", "json")):
+            schema_id = writer.register_schema(
+                name=name, encoding="jsonschema" if encoding == "json" else encoding,
+                data=b'{"type": "object"}')
+            channels[topic] = writer.register_channel(topic=topic, message_encoding=encoding,
                                                       schema_id=schema_id)
         for i, (image, record) in enumerate(looks):
             t_ns = (i + 1) * 1_000_000
-            for topic, body in ((schemas.IMAGE_TOPIC, image), (schemas.ITERATION_TOPIC, record)):
+            for topic, body in ((IMAGE_TOPIC, image), (ITERATION_TOPIC, record)):
                 writer.add_message(channels[topic], log_time=t_ns, publish_time=t_ns,
                                    data=data(body))
         writer.finish()
@@ -281,6 +284,26 @@ BAD_SHAPES = {
     "nesting 100000 deep": (_image(), b"[" * 100_000 + b"]" * 100_000,
                             "not a readable finepos recording"),
 }
+
+
+PROTOBUF_IMAGE = b"\x12\x05\xff\xd8abc\x1a\x04jpeg"  # data (field 2), format (field 3)
+BAD_PROTOBUF = {
+    "data past the end": (b"\x12\x7f\xff\xd8", "claims 127 bytes"),
+    "endless varint": (b"\x12" + b"\xff" * 12, "varint"),
+    "wire type 7": (b"\x17abc", "unknown wire type 7"),
+    "no frame": (b"\x1a\x04jpeg", "neither JPEG nor PNG"),
+    "a frame without header": (PROTOBUF_IMAGE, "no frame header"),
+}
+
+
+@pytest.mark.parametrize("case", BAD_PROTOBUF)
+def test_a_damaged_protobuf_image_is_one_line_naming_file_and_fault(tmp_path, capsys, case):
+    image, expected = BAD_PROTOBUF[case]
+    _write_recording(tmp_path / "bad.mcap", [(image, _record())], image_encoding="protobuf")
+    err = _one_line_error(capsys, ["replay", str(tmp_path / "bad.mcap"),
+                                   "--out", str(tmp_path / "v.mp4")])
+    assert "bad.mcap" in err and expected in err, err
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["bad.mcap"]
 
 
 @pytest.mark.parametrize("case", BAD_SHAPES)

@@ -8,7 +8,7 @@ import urllib.request
 
 from mcap.reader import make_reader
 
-from controller.recording.schemas import IMAGE_TOPIC, ITERATION_TOPIC
+from controller.recording.channels import IMAGE_TOPIC, ITERATION_TOPIC
 from drivers.core.pose import ToolStep
 from tests.mocks.fakes import FakeArm, FakeCamera, FakeWrenchSensor
 
