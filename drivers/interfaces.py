@@ -14,6 +14,7 @@ import enum
 import logging
 import math
 from abc import ABC, abstractmethod
+from collections.abc import Callable
 from dataclasses import dataclass
 
 import numpy as np
@@ -24,6 +25,8 @@ from drivers.core.timing import VAL_SPEED_MAX, VAL_SPEED_MIN
 from drivers.safety import SafetyLimits, check_target, check_tool_step
 
 logger = logging.getLogger(__name__)
+
+MOVE_UNTIL_STEP_MM = 0.5  # Arm.move_until's default checks its stop condition this often
 
 
 class Lifecycle(enum.Enum):
@@ -117,6 +120,18 @@ class Device(ABC):
 
 
 @dataclass(frozen=True)
+class Descent:
+    """What a guarded descent (``Arm.guarded_descent``) did.
+
+    pose: the tool pose where the arm stands; contact: the contact input stopped it before
+    the target (False: it reached the target, the input never tripped).
+    """
+
+    pose: Pose
+    contact: bool
+
+
+@dataclass(frozen=True)
 class Motion:
     """What a motion command did.
 
@@ -189,6 +204,68 @@ class Arm(Device):
             sent, clipped = decision.step, decision.clipped
         reached = self._move(current, current.moved_in_tool_frame(sent))
         return Motion(step, sent, reached, clipped)
+
+    @property
+    def runs_programs(self) -> bool:
+        """Whether ``guarded_descent`` runs: the arm's controller stops a descent on its
+        contact input by itself (VAL with ``arm.programs``, the simulated arm)."""
+        return False
+
+    def guarded_descent(self, via: Pose, target: Pose, guard_speed_percent: float) -> Descent:
+        """Open the jaws as the arm starts, move to ``via`` at the set speed and on to
+        ``target`` at ``guard_speed_percent`` of it, stopping at once when the contact input
+        (the wrist sensor's monitor output) trips, in one controller command.
+
+        Both poses pass the safety layer first (rejected, nothing moves, when either is beyond
+        it). Raises MotionRejectedError when the input is already high (nothing moves), or
+        when the arm does not run programs (``runs_programs``).
+        """
+        self._require_active()
+        if not self.runs_programs:
+            raise MotionRejectedError(f"{type(self).__name__} runs no guarded descent")
+        if not 0.0 < guard_speed_percent <= 100.0:
+            raise MotionRejectedError(f"guard speed must be in (0, 100] percent, got "
+                                      f"{guard_speed_percent!r}")
+        current = self._start_pose()
+        if self.limits:
+            for pose in (via, target):
+                decision = check_target(pose, current, self.limits)
+                if decision.clipped:
+                    raise MotionRejectedError(f"guarded descent beyond the safety limits at "
+                                              f"{pose}")
+        self._reached, self._move_start = None, current
+        try:
+            descent = self._guarded_descent(via, target, guard_speed_percent)
+        finally:
+            self._move_start = None
+        self._reached = descent.pose
+        self._jaws_open = True
+        return descent
+
+    def move_until(self, target: Pose, stop: Callable[[], bool], speed_factor: float = 1.0,
+                   setup: bool = True) -> tuple[Pose, bool]:
+        """Absolute move to ``target`` that ends at once where ``stop()`` turns true (what a
+        controller program's motion does under a reaction); returns the pose reached and
+        whether ``stop`` ended it. ``speed_factor``: the program's speed on top of the set
+        speed; ``setup``: the move pays the controller's set-up (the first motion of a program
+        run; later ones do not). This default checks ``stop`` every
+        ``MOVE_UNTIL_STEP_MM`` of a stepped move and ignores both timings; timed backends
+        override it."""
+        self._require_active()
+        start = self.pose(fresh=False)
+        step = start.tool_step_to(target)
+        distance = math.hypot(step.dx_mm, step.dy_mm, step.dz_mm)
+        count = max(1, math.ceil(distance / MOVE_UNTIL_STEP_MM))
+        for i in range(1, count + 1):
+            if stop():
+                return self.pose(fresh=False), True
+            scaled = ToolStep(*(v * i / count for v in step.as_dict().values()))
+            self.move_to(start.moved_in_tool_frame(scaled) if i < count else target)
+        return self.pose(fresh=False), stop()
+
+    def _guarded_descent(self, via: Pose, target: Pose, guard_speed_percent: float) -> Descent:
+        """Backends that run programs implement this (see ``guarded_descent``)."""
+        raise MotionRejectedError(f"{type(self).__name__} runs no guarded descent")
 
     def set_speed(self, percent: float) -> None:
         """Monitor speed in percent: VAL's range, 0.01..327.67, 100 normal."""
@@ -326,8 +403,44 @@ class Wrench:
         return math.sqrt(self.fx_n**2 + self.fy_n**2 + self.fz_n**2)
 
 
+@dataclass(frozen=True)
+class MonitorCondition:
+    """A threshold the sensor evaluates itself, switching its discrete output (ATI "monitor
+    condition"): ``axis op limit`` on the biased reading, e.g. ``fz_n < -3.0``.
+
+    axis: one wrench component (``fx_n`` .. ``tz_nm``); op: ``>`` or ``<``; limit: N or N*m.
+    """
+
+    axis: str
+    op: str
+    limit: float
+
+    def __post_init__(self) -> None:
+        if self.axis not in ("fx_n", "fy_n", "fz_n", "tx_nm", "ty_nm", "tz_nm"):
+            raise ValueError(f"axis: one of fx_n, fy_n, fz_n, tx_nm, ty_nm, tz_nm, got "
+                             f"{self.axis!r}")
+        if self.op not in (">", "<"):
+            raise ValueError(f"op: '>' or '<', got {self.op!r}")
+        if not math.isfinite(self.limit):
+            raise ValueError(f"limit: must be finite, got {self.limit!r}")
+
+    def tripped(self, wrench: Wrench) -> bool:
+        value = getattr(wrench, self.axis)
+        return value > self.limit if self.op == ">" else value < self.limit
+
+
 class WrenchSensor(Device):
     """A 6-axis wrist force-torque sensor."""
+
+    def set_monitor_condition(self, condition: MonitorCondition | None) -> None:
+        """Have the sensor switch its output while ``condition`` holds on its biased
+        readings (None: clear it, the output stays low). Raises DeviceFaultError when the
+        sensor has no such output."""
+        self._require_connected()
+        self._set_monitor_condition(condition)
+
+    def _set_monitor_condition(self, condition: MonitorCondition | None) -> None:
+        raise DeviceFaultError(f"{type(self).__name__} has no monitor output")
 
     def read(self) -> Wrench:
         """One biased reading."""

@@ -22,14 +22,32 @@ the tool frame (z = approach axis), so pressing down onto the table gives Fz < 0
 from __future__ import annotations
 
 import contextlib
+import math
 import time
+from collections.abc import Callable
+from dataclasses import dataclass
 
 import numpy as np
 
-from drivers.core.errors import DeviceFaultError, FineposError
+from drivers.core.errors import DeviceFaultError, FineposError, MotionRejectedError
 from drivers.core.pose import Pose
-from drivers.core.timing import profile_fraction
-from drivers.interfaces import Arm, Camera, Frame, Wrench, WrenchSensor
+from drivers.core.timing import (
+    VAL_SPEED_MAX,
+    VAL_SPEED_MIN,
+    joint_motion_s,
+    profile_elapsed,
+    profile_fraction,
+    stop_overtravel,
+)
+from drivers.interfaces import (
+    Arm,
+    Camera,
+    Descent,
+    Frame,
+    MonitorCondition,
+    Wrench,
+    WrenchSensor,
+)
 from drivers.safety import SafetyLimits
 from sim_backend.cell import hand_camera
 from sim_backend.cell import timing as cell_timing
@@ -38,6 +56,39 @@ from sim_backend.cell.timing import CellTiming
 
 # Behind the emulators a timed move passes through intermediate poses this often (s).
 _ANIMATION_STEP_S = 0.02
+# A motion that a condition may stop (``SimArm.move_until``) looks at it this often along its
+# path (mm): at 8 N/mm contact stiffness, 2 N between two looks.
+_WATCH_STEP_MM = 0.25
+# The VAL lines of one guarded descent on the program path, as the VAL driver's defaults send
+# them: two ``do set`` lines of a location (57 characters each), ``ex fpdesc``, the ``*``
+# prompt and the closing prompt (see ``drivers.val.config``).
+_SET_LINE_CHARS = 57
+_DESCENT_LINES = ("ex fpdesc",)
+
+
+@dataclass
+class ContactWire:
+    """The wrist sensor's monitor output wired to the simulated arm's input, in one process:
+    ``high()`` holds while the sensor's monitor condition holds on its biased reading."""
+
+    cell: object
+    condition: MonitorCondition | None = None
+    offset: np.ndarray | None = None
+
+    def high(self) -> bool:
+        if self.condition is None:
+            return False
+        reading = self.cell.wrench() - (self.offset if self.offset is not None else 0.0)
+        return self.condition.tripped(Wrench(*(float(v) for v in reading)))
+
+
+def contact_wire(cell) -> ContactWire:
+    """The cell's contact wire (one per cell, made on first use)."""
+    wire = getattr(cell, "_finepos_contact_wire", None)
+    if wire is None:
+        wire = ContactWire(cell)
+        cell._finepos_contact_wire = wire
+    return wire
 
 
 def _require_open(cell: SimCell, device: str) -> None:
@@ -124,6 +175,106 @@ class SimArm(Arm):
                 wait_until(arm.t0_s + elapsed)
             self.cell.move_arm(final)
         timing.motion_s += seconds
+
+    # -- program motions -----------------------------------------------------------------
+    @property
+    def runs_programs(self) -> bool:
+        """``arm.options.programs`` (the simulated arm's ``SimArmConfig.programs``)."""
+        return bool(getattr(self.cell.arm_config, "programs", False))
+
+    def set_jaws_during_motion(self, closed: bool) -> None:
+        """VAL's ``OPEN`` / ``CLOSE``: the jaws move while the next motion runs (no wait)."""
+        if closed:
+            self.cell.close_gripper()
+        else:
+            self.cell.open_gripper()
+
+    def move_until(self, target: Pose, stop: Callable[[], bool], speed_factor: float = 1.0,
+                   setup: bool = True) -> tuple[Pose, bool]:
+        """A program's motion (see ``Arm.move_until``): ``stop`` is looked at every
+        ``_WATCH_STEP_MM`` of the path; when it turns true the arm goes on for the reaction
+        (``timing.arm.reaction_s`` and the sensor's ``ati_output_s``) and brakes, then
+        settles. Timed: the set-up ``t0_s`` only with ``setup``, the profile at the set speed
+        times ``speed_factor``, the settling at the stop."""
+        self._require_active()
+        timing, cell = self.timing, self.cell
+        begin = timing.take_command_start() if timing is not None else 0.0
+        start = cell.arm_pose()
+        start_q = np.array(cell.joint_angles_deg(), dtype=float)
+        from sim_backend.cell.sim_cell import _tool_matrix  # the cell's own inverse kinematics
+
+        goal_q = np.degrees(cell._solve(_tool_matrix(target)))
+        delta = goal_q - start_q
+        speed = min(VAL_SPEED_MAX, max(VAL_SPEED_MIN, self.speed_percent * speed_factor))
+        step = start.tool_step_to(target)
+        distance = math.hypot(step.dx_mm, step.dy_mm, step.dz_mm)
+        count = max(1, math.ceil(distance / _WATCH_STEP_MM))
+        arm = timing.config.arm if timing is not None else None
+        profile_s = joint_motion_s(delta, speed, arm) if arm is not None else 0.0
+        t0 = arm.t0_s if arm is not None and setup else 0.0
+        wall = timing is not None and not timing.clock.virtual
+
+        def wait_until(offset_s: float) -> None:
+            if wall:
+                timing.clock.advance(begin + offset_s - timing.clock.now())
+
+        stopped_at = None
+        if stop():
+            stopped_at = 0.0
+        else:
+            for i in range(1, count + 1):
+                fraction = i / count
+                wait_until(t0 + profile_elapsed(fraction) * profile_s)
+                with contextlib.suppress(FineposError):  # a refused pose on the way: go on
+                    cell.move_arm(_interpolate(start, target, fraction) if i < count
+                                  else target)
+                if i < count and stop():
+                    stopped_at = fraction
+                    break
+        if stopped_at is None:
+            elapsed = t0 + profile_s
+        else:
+            latency = timing.config.arm.reaction_s + timing.config.ati_output_s \
+                if timing is not None else 0.0
+            accel = arm.joint_accel_deg_s2 * speed / 100.0 if arm is not None else 0.0
+            over, rest_s = stop_overtravel(stopped_at, distance, profile_s,
+                                           float(np.max(np.abs(delta))), accel, latency)
+            final = min(1.0, stopped_at + (over / distance if distance > 0 else 0.0))
+            if final > stopped_at:
+                with contextlib.suppress(FineposError):
+                    cell.move_arm(_interpolate(start, target, final))
+            elapsed = t0 + profile_elapsed(stopped_at) * profile_s + rest_s
+        if timing is not None:
+            elapsed += timing.config.arm.settle_s
+            if wall:
+                timing.motion_s += elapsed
+                wait_until(elapsed)
+            else:
+                timing.motion(elapsed)
+        self._reached = cell.arm_pose()
+        return self._reached, stopped_at is not None
+
+    def _guarded_descent(self, via: Pose, target: Pose, guard_speed_percent: float) -> Descent:
+        """In process, as the VAL driver's program path: the target lines and ``ex fpdesc``
+        on the VAL line, the jaws opening as the arm starts, the first motion with its
+        set-up, the guarded one at the guard speed without, each settling where it stops;
+        a stop on contact costs a ``where`` (the driver reads where the arm stopped)."""
+        timing = self.timing
+        wire = contact_wire(self.cell)
+        if timing is not None:
+            lines = [cell_timing.val_exchange_bytes("x" * _SET_LINE_CHARS)] * 2
+            lines += [cell_timing.val_exchange_bytes(line, 3) for line in _DESCENT_LINES]
+            timing.val_wire(sum(lines))
+        if wire.high():
+            raise MotionRejectedError("the contact input is high before the descent")
+        self.cell.open_gripper()
+        pose, contact = self.move_until(via, wire.high, 1.0, setup=True)
+        if not contact:
+            pose, contact = self.move_until(target, wire.high, guard_speed_percent / 100.0,
+                                            setup=False)
+        if contact and timing is not None:
+            timing.val_wire(cell_timing.where_bytes())
+        return Descent(pose, contact)
 
     def _set_speed(self, percent: float) -> None:
         self.speed_percent = percent
@@ -248,3 +399,8 @@ class SimWrenchSensor(WrenchSensor):
 
     def _bias(self) -> None:
         self._offset = self.cell.wrench()
+        contact_wire(self.cell).offset = self._offset
+
+    def _set_monitor_condition(self, condition: MonitorCondition | None) -> None:
+        wire = contact_wire(self.cell)
+        wire.condition, wire.offset = condition, self._offset

@@ -40,7 +40,8 @@ class ArmTiming:
     joint_speed_deg_s / joint_accel_deg_s2: each joint's cruise speed and acceleration at
     ``speed 100``; settle_s: from the end of the profile to the prompt (servo settling);
     hand_time_s: ``openi`` / ``closei`` wait for the motion, then this (V+ ``HAND.TIME``,
-    0.5 s by default).
+    0.5 s by default); reaction_s: from an input line going high to the arm braking under a
+    program's ``REACTI`` (a judgement: one VAL II trajectory cycle, 28 ms).
     """
 
     t0_s: float = field(default=0.12, metadata={"min": 0.0, "max": 10.0})
@@ -48,6 +49,7 @@ class ArmTiming:
     joint_accel_deg_s2: float = field(default=240.0, metadata=_POSITIVE)
     settle_s: float = field(default=0.08, metadata={"min": 0.0, "max": 10.0})
     hand_time_s: float = field(default=0.5, metadata={"min": 0.0, "max": 10.0})
+    reaction_s: float = field(default=0.028, metadata={"min": 0.0, "max": 1.0})
 
 
 @dataclass(frozen=True)
@@ -81,14 +83,17 @@ class TimingConfig:
 
     val_baud: the VAL terminal line (9600, confirmed); ati_baud: the ATI F/T controller's line
     (38400, from a public driver); bits_per_byte: 10 for 8N1; wrench_rate_hz: the sensor's
-    output rate (a reading is never fresher than one sample); arm / camera: see
-    ArmTiming and CameraTiming.
+    output rate (a reading is never fresher than one sample); ati_output_s: from a monitor
+    condition holding to the sensor's discrete output switching (no public figure for the
+    serial controller; a judgement, "a few ms" is typical of threshold outputs); arm / camera:
+    see ArmTiming and CameraTiming.
     """
 
     val_baud: int = field(default=9600, metadata={"min": 50})
     ati_baud: int = field(default=38400, metadata={"min": 50})
     bits_per_byte: int = field(default=BITS_PER_BYTE_8N1, metadata={"min": 7, "max": 12})
     wrench_rate_hz: float = field(default=100.0, metadata={"min": 1.0, "max": 10000.0})
+    ati_output_s: float = field(default=0.005, metadata={"min": 0.0, "max": 1.0})
     arm: ArmTiming = ArmTiming()
     camera: CameraTiming = CameraTiming()
 
@@ -132,6 +137,38 @@ def profile_fraction(elapsed_s: float, total_s: float) -> float:
         return 0.0
     x = elapsed_s / total_s
     return x * x * (3.0 - 2.0 * x)
+
+
+def profile_elapsed(fraction: float) -> float:
+    """The share of a profile's time (0..1) at which ``profile_fraction`` reaches
+    ``fraction`` of the path (its inverse)."""
+    if fraction <= 0.0:
+        return 0.0
+    if fraction >= 1.0:
+        return 1.0
+    low, high = 0.0, 1.0
+    for _ in range(40):
+        mid = (low + high) / 2.0
+        if mid * mid * (3.0 - 2.0 * mid) < fraction:
+            low = mid
+        else:
+            high = mid
+    return (low + high) / 2.0
+
+
+def stop_overtravel(fraction: float, distance: float, profile_s: float, joint_travel_deg: float,
+                    accel_deg_s2: float, latency_s: float) -> tuple[float, float]:
+    """(path beyond the trip point, seconds from the trip to rest) of a move stopped at once
+    ``fraction`` of its way along ``distance`` (any unit) over ``profile_s``: it goes on at its
+    speed for ``latency_s``, then brakes at ``accel_deg_s2`` on its largest joint
+    (``joint_travel_deg``: that joint's whole travel)."""
+    if profile_s <= 0.0 or distance <= 0.0:
+        return 0.0, latency_s
+    x = profile_elapsed(fraction)
+    rate = 6.0 * x * (1.0 - x) / profile_s  # d(fraction)/dt of profile_fraction's s-curve
+    brake_s = rate * joint_travel_deg / accel_deg_s2 if accel_deg_s2 > 0 else 0.0
+    speed = rate * distance
+    return speed * (latency_s + brake_s / 2.0), latency_s + brake_s
 
 
 def joint_motion_s(delta_deg: Sequence[float], speed_percent: float, arm: ArmTiming) -> float:

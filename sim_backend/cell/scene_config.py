@@ -261,7 +261,10 @@ class SimArmConfig:
     (pressing with stiffness x depth: 40 N by default; the force guards must stop it);
     wrench_noise_n: standard deviation of the sensor's force noise (torque noise is a tenth
     of it in N*m); grip_force_n: the force limit of the jaws' closing (each finger; a small
-    pneumatic parallel gripper, a judgement).
+    pneumatic parallel gripper, a judgement); programs: the arm runs the grasp's guarded
+    descent as one controller program stopped by the wrist sensor's monitor output, timed as
+    the VAL driver's program path (``arm.programs`` of a VAL arm); false: every move is one
+    command.
     """
 
     repeatability_mm: float = field(default=0.02, metadata={"min": 0.0, "max": 5.0})
@@ -271,6 +274,7 @@ class SimArmConfig:
     max_penetration_mm: float = field(default=5.0, metadata={"min": 0.0, "exclusive_min": True})
     wrench_noise_n: float = field(default=0.02, metadata={"min": 0.0, "max": 1.0})
     grip_force_n: float = field(default=10.0, metadata={"min": 0.5, "max": 200.0})
+    programs: bool = False
 
 
 def load_scene(path: str | Path) -> SceneConfig:

@@ -41,6 +41,10 @@ DEFAULT_FPS = 30.0
 # right after a 14 mm move read the frame from before it (the loop stepped twice as far and
 # the grasp met the part 3 mm off its centre).
 STREAM_MARGIN_S = 0.15
+# The wire from the ATI controller's discrete output to the VAL controller's input line, as
+# the drivers' defaults name them (arm.program_input, wrench.monitor_output).
+VAL_INPUT_SIGNAL = 1001
+ATI_OUTPUT = 1
 
 
 class SerialisedCell:
@@ -170,6 +174,9 @@ class CellEmulators(Lifecycle):
                 self.ati = stack.enter_context(AtiEmulator(
                     sensor, *self._counts, tcp_port=self._ati_tcp_port,
                     baud=config.ati_baud if config else None))
+                controller = self.ati.controller
+                self.val.monitor.set_input(VAL_INPUT_SIGNAL,
+                                           lambda: controller.output_high(ATI_OUTPUT))
             if self._mjpeg_port is not None:
                 camera = stack.enter_context(SimCamera(self.cell, timing))
                 self.mjpeg = stack.enter_context(MjpegServer(camera, port=self._mjpeg_port,

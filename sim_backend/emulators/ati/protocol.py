@@ -63,6 +63,7 @@ class AtiController:
         self.average_n = 0
         self.biases: list[np.ndarray] = []
         self.streaming = False
+        self.conditions: dict[int, tuple[int, str, int]] = {}  # output -> (axis, op, counts)
 
     @property
     def eol(self) -> bytes:
@@ -112,9 +113,42 @@ class AtiController:
             self.biases = self.biases[:-1]
         elif name == "SZ":
             self.biases = []
+        elif name == "MC":
+            self._set_condition(args)
         else:
             raise ValueError(f"unknown command {name}")
         return b""
+
+    def _set_condition(self, args: list[str]) -> None:
+        if not args:
+            self.conditions = {}
+            return
+        axes = ("FX", "FY", "FZ", "TX", "TY", "TZ")
+        if len(args) != 4 or args[0] not in axes or args[1] not in ("<", ">"):
+            raise ValueError("MC needs axis (FX..TZ), < or >, counts, output")
+        try:
+            counts, output = int(args[2]), int(args[3])
+        except ValueError:
+            raise ValueError(f"bad number in {' '.join(args)}") from None
+        if not 1 <= output <= 4:
+            raise ValueError(f"no output {output}")
+        self.conditions[output] = (axes.index(args[0]), args[1], counts)
+
+    def output_high(self, output: int) -> bool:
+        """Whether discrete ``output`` is high: its monitor condition holds on a fresh biased
+        reading (no condition: low). A failing sensor leaves it low."""
+        condition = self.conditions.get(output)
+        if condition is None:
+            return False
+        axis, op, counts = condition
+        try:
+            raw = self._resolved_counts(1)
+        except FineposError:
+            return False
+        if self.biases:
+            raw = raw - self.biases[-1]
+        value = int(raw[axis])
+        return value < counts if op == "<" else value > counts
 
     def _set_data_mode(self, args: list[str]) -> None:
         if len(args) != 1 or args[0] not in ("A", "B", "R", "D", "H"):
@@ -141,9 +175,10 @@ class AtiController:
             fields = [f"{v:6d}" for v in values]
         return (",".join([f"{status}"] + fields)).encode("ascii") + self.eol
 
-    def _resolved_counts(self) -> np.ndarray:
-        """Current load in counts (the mean of ``average_n`` readings), unbiased."""
-        n = max(1, self.average_n)
+    def _resolved_counts(self, samples: int | None = None) -> np.ndarray:
+        """Current load in counts (the mean of ``samples`` readings, by default
+        ``average_n``), unbiased."""
+        n = max(1, self.average_n if samples is None else samples)
         readings = [list(self.sensor.read().as_dict().values()) for _ in range(n)]
         return np.rint(np.mean(readings, axis=0) * self.scale).astype(np.int64)
 

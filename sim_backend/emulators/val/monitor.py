@@ -22,6 +22,7 @@ from __future__ import annotations
 
 import logging
 import re
+import threading
 from collections.abc import Callable
 from dataclasses import dataclass
 
@@ -36,6 +37,13 @@ from sim_backend.emulators.val.kinematics import (
     Joints,
     Puma260,
     within_ranges,
+)
+from sim_backend.emulators.val.programs import (
+    PROGRAM_RUNNING,
+    UNDEFINED_PROGRAM,
+    InstructionError,
+    ProgramRun,
+    check_instruction,
 )
 
 logger = logging.getLogger(__name__)
@@ -52,7 +60,10 @@ CHANGE_QUESTION = "Change? "
 PROMPT = "."
 
 # Monitor commands and the shortest abbreviation accepted for each.
-_MONITOR_COMMANDS = {"where": 1, "speed": 2, "point": 3, "calibrate": 3, "abort": 2, "do": 2}
+_MONITOR_COMMANDS = {"where": 1, "speed": 2, "point": 3, "calibrate": 3, "abort": 2, "do": 2,
+                     "edit": 2, "listp": 4, "execute": 2}
+_SET = re.compile(r"set\s+(?P<name>[a-z][a-z0-9_.]*)\s*=\s*(?P<value>.*)", re.IGNORECASE)
+PROGRAM_PROMPT = "*"  # the prompt while a program runs
 _NUMBER = re.compile(r"[+-]?(?:\d+\.?\d*|\.\d+)(?:[eE][+-]?\d+)?")
 _NAME = re.compile(r"#?[a-z][a-z0-9_.]*")
 _TRANS = re.compile(r"trans\s*\((?P<args>[^()]*)\)", re.IGNORECASE)
@@ -70,6 +81,7 @@ class Response:
 
     echo: bytes
     reply: bytes
+    after: Callable[[], None] | None = None  # call once the reply is out (starts a program)
 
 
 def _text(lines: list[str], tail: str) -> bytes:
@@ -82,6 +94,13 @@ def _numbers(text: str, count: int) -> list[float]:
     if len(fields) != count or not all(_NUMBER.fullmatch(f) for f in fields):
         raise _Refusal(SYNTAX_ERROR)
     return [float(f) for f in fields]
+
+
+def _refusal_text(exc: Exception) -> str:
+    """The controller error text for an arm failure (refused poses: out of range)."""
+    if isinstance(exc, MotionRejectedError):
+        return OUT_OF_RANGE
+    return " ".join(str(exc).replace("*", " ").split()) or type(exc).__name__
 
 
 def _column(value: float, decimals: int) -> str:
@@ -100,7 +119,17 @@ def _joint_lines(joints: Joints) -> list[str]:
 
 class ValMonitor:
     """One VAL II monitor session driving ``arm`` (connected and active, without safety limits:
-    the VAL driver applies those)."""
+    the VAL driver applies those).
+
+    Programs (``sim_backend.emulators.val.programs``): ``EDIT name`` asks for numbered lines
+    (``  1? ``; each checked as it is entered, a refused one is asked again after the error
+    line) until ``E``; ``LISTP name`` prints ``.PROGRAM name``, the numbered lines and
+    ``.END``; ``EXECUTE name`` (``EX``) answers the ``*`` prompt at once and runs the program
+    on its own thread: ``on_program_end`` receives what it prints when it ends (its TYPE lines
+    or error, then the ``.`` prompt). While it runs only ``ABORT`` (stops the motion at once,
+    ends the program, then the prompt) and ``WHERE`` are taken; any other command gets
+    ``*Program already running*``. ``set_input(sig, source)`` wires an input line.
+    """
 
     def __init__(self, arm: Arm, kinematics: Puma260 | None = None,
                  boot_questions: bool = False) -> None:
@@ -115,6 +144,45 @@ class ValMonitor:
         self._known: tuple[Pose, Joints] | None = None
         self._transformations: dict[str, Pose] = {}
         self._precision_points: dict[str, Joints] = {}
+        self._programs: dict[str, list[str]] = {}
+        self._inputs: dict[int, Callable[[], bool]] = {}
+        self._run: ProgramRun | None = None
+        self._thread: threading.Thread | None = None
+        self._starting: Callable[[], None] | None = None
+        self.on_program_end: Callable[[bytes], None] = lambda _data: None
+        self.programs_run = 0
+
+    # -- inputs and programs ---------------------------------------------------------------------
+    def set_input(self, signal: int, source: Callable[[], bool] | None) -> None:
+        """Wire input line ``signal`` to ``source()`` (None: unwired, always low)."""
+        if source is None:
+            self._inputs.pop(signal, None)
+        else:
+            self._inputs[signal] = source
+
+    def input_high(self, signal: int) -> bool:
+        source = self._inputs.get(signal)
+        return bool(source()) if source is not None else False
+
+    @property
+    def program_running(self) -> bool:
+        return self._thread is not None and (self._thread.is_alive()
+                                             or self._thread.ident is None)
+
+    def wait_program(self, timeout_s: float | None = None) -> bool:
+        """Wait for a running program to end; False on timeout."""
+        thread = self._thread
+        if thread is not None and thread.ident is not None:
+            thread.join(timeout_s)
+            return not thread.is_alive()
+        return True
+
+    def stop_program(self) -> None:
+        """End a running program at once (closing the emulator), without output."""
+        if self._run is not None:
+            self._run.abort()
+            self._arm_halt()
+            self.wait_program()
 
     def first_output(self) -> bytes:
         """What the controller prints when it comes up: the first boot question or the prompt."""
@@ -126,10 +194,14 @@ class ValMonitor:
         echo = line.encode("latin-1") + b"\r\n"
         if self._pending is not None:
             return Response(echo, self._pending(line))
+        if self.program_running:
+            return Response(echo, self._while_running(line))
         if forced_error is not None:
             return Response(echo, _text([f"*{forced_error}*"], PROMPT))
         try:
-            return Response(echo, self._command(line))
+            reply = self._command(line)
+            starting, self._starting = self._starting, None
+            return Response(echo, reply, starting)
         except _Refusal as refusal:
             return Response(echo, _text([f"*{refusal}*"], PROMPT))
 
@@ -175,7 +247,78 @@ class ValMonitor:
             return _text([], PROMPT)
         if name == "do":
             return self._do(rest.strip())
+        if name == "edit" and _NAME.fullmatch(rest.strip().lower() or "#"):
+            return self._edit_program(rest.strip().lower(), [])
+        if name == "listp" and rest.strip():
+            return self._list_program(rest.strip().lower())
+        if name == "execute" and rest.strip():
+            return self._execute(rest.strip().lower())
         raise _Refusal(UNKNOWN_COMMAND if name is None else SYNTAX_ERROR)
+
+    # -- programs ------------------------------------------------------------------------------
+    def _edit_program(self, name: str, lines: list[str]) -> bytes:
+        def answer(text: str) -> bytes:
+            if text.strip().lower() == "e":
+                self._pending = None
+                self._programs[name] = lines
+                return _text([], PROMPT)
+            try:
+                check_instruction(text)
+            except InstructionError as refusal:
+                return self._ask([f"*{refusal}*"], f"{len(lines) + 1:3d}? ", answer)
+            lines.append(text.strip())
+            return self._ask([], f"{len(lines) + 1:3d}? ", answer)
+
+        return self._ask([f".PROGRAM {name}"], f"{len(lines) + 1:3d}? ", answer)
+
+    def _list_program(self, name: str) -> bytes:
+        if name not in self._programs:
+            raise _Refusal(UNDEFINED_PROGRAM)
+        body = [f"{i:3d}  {line}" for i, line in enumerate(self._programs[name], 1)]
+        return _text([f".PROGRAM {name}", *body, ".END"], PROMPT)
+
+    def _execute(self, name: str) -> bytes:
+        if name not in self._programs:
+            raise _Refusal(UNDEFINED_PROGRAM)
+        run = ProgramRun(self._arm, self._programs, self._transformations, self.input_high)
+        self._run = run
+        self.programs_run += 1
+
+        def body() -> None:
+            lines: list[str] = []
+            try:
+                run.run(name)
+            except InstructionError as exc:
+                lines = [f"*{exc}*"]
+            except _Refusal as exc:
+                lines = [f"*{exc}*"]
+            except FineposError as exc:
+                lines = [f"*{_refusal_text(exc)}*"]
+            if not run.aborted.is_set():
+                self.on_program_end(_text(run.output + lines, PROMPT))
+
+        self._thread = threading.Thread(target=body, name=f"VAL program {name}", daemon=True)
+        self._starting = self._thread.start
+        return _text([], PROGRAM_PROMPT)
+
+    def _while_running(self, line: str) -> bytes:
+        words = line.strip().lower().split()
+        head = words[0] if words else ""
+        if head and "abort".startswith(head) and len(head) >= 2 and len(words) == 1:
+            self.stop_program()
+            return _text([], PROMPT)
+        if head and "where".startswith(head) and len(words) == 1:
+            try:
+                return self._where()
+            except _Refusal as refusal:
+                return _text([f"*{refusal}*"], PROGRAM_PROMPT)
+        return _text([f"*{PROGRAM_RUNNING}*"], PROGRAM_PROMPT)
+
+    def _arm_halt(self) -> None:
+        try:
+            self._arm.halt()
+        except FineposError as exc:
+            logger.warning("VAL emulator: halt failed: %s", exc)
 
     def _calibrated(self, yes: bool) -> bytes:
         logger.info("VAL emulator: calibration %s", "done" if yes else "skipped")
@@ -197,7 +340,9 @@ class ValMonitor:
         words = rest.split(None, 1)
         instruction = words[0].lower() if words else ""
         argument = words[1].strip() if len(words) > 1 else ""
-        if instruction == "move" and argument:
+        if instruction == "set" and _SET.fullmatch(rest):
+            self._set_location(_SET.fullmatch(rest))
+        elif instruction == "move" and argument:
             self._move_to_location(argument)
         elif instruction == "drive" and argument:
             self._drive(argument)
@@ -227,6 +372,13 @@ class ValMonitor:
             if name not in self._transformations:
                 raise _Refusal(UNDEFINED_LOCATION)
             self._move_pose(self._transformations[name])
+
+    def _set_location(self, match: re.Match[str]) -> None:
+        trans = _TRANS.fullmatch(match.group("value").strip())
+        if not trans:
+            raise _Refusal(SYNTAX_ERROR)
+        self._transformations[match.group("name").lower()] = Pose(
+            *_numbers(trans.group("args"), 6))
 
     def _drive(self, argument: str) -> None:
         joint, delta_deg, speed_percent = _numbers(argument, 3)
@@ -267,8 +419,7 @@ class ValMonitor:
             raise _Refusal(OUT_OF_RANGE) from exc
         except FineposError as exc:
             logger.warning("VAL emulator: arm failed: %s", exc)
-            message = " ".join(str(exc).replace("*", " ").split()) or type(exc).__name__
-            raise _Refusal(message) from exc
+            raise _Refusal(_refusal_text(exc)) from exc
 
     # -- point dialogues -----------------------------------------------------------------------
     def _point(self, name: str) -> bytes:

@@ -81,7 +81,22 @@ class ValEmulator(LinkServer):
         self._assembler = LineAssembler()
         self._changed = threading.Condition()
         self._listeners: list[ValListener] = []
+        self._write_lock = threading.Lock()  # the serving and the program threads both write
+        self._monitor.on_program_end = self._program_ended
         self.lines_handled = 0
+
+    @property
+    def monitor(self) -> ValMonitor:
+        """The monitor served (``set_input`` wires its input lines)."""
+        return self._monitor
+
+    def _program_ended(self, data: bytes) -> None:
+        link = self._link
+        if link is None or self._link_down:
+            return
+        self._tell("done", "program")
+        with self._write_lock:
+            link.write(self._faults.garbage + data)
 
     def add_listener(self, listener: ValListener) -> None:
         """Call ``listener(event, text)`` for every line run and every fault (see ValListener);
@@ -113,6 +128,7 @@ class ValEmulator(LinkServer):
         with self._changed:  # ends a pending reply delay
             self._changed.notify_all()
         super()._interrupt()
+        self._monitor.stop_program()
 
     def _release(self) -> None:
         super()._release()
@@ -149,7 +165,8 @@ class ValEmulator(LinkServer):
             response = self._monitor.handle_line(line, faults.forced_error)
             if faults.forced_error is None:
                 self._tell("done", line)
-            link.write(response.echo)
+            with self._write_lock:
+                link.write(response.echo)
             if faults.reply_delay_s > 0:
                 self._tell("fault", "reply_delay")
                 with self._changed:
@@ -161,4 +178,7 @@ class ValEmulator(LinkServer):
                 self.lines_handled += 1
             if faults.garbage:
                 self._tell("fault", "garbage")
-            link.write(faults.garbage + response.reply)
+            with self._write_lock:
+                link.write(faults.garbage + response.reply)
+            if response.after is not None:
+                response.after()
