@@ -18,7 +18,12 @@ class AtiConfig:
 sync_quiet_s: at start-up, stale bytes are drained until the line is quiet this long;
     startup_commands: sent in order after the prompt was found, each answered by the prompt
     (``CD A`` ASCII output, ``CD R`` resolved forces; add e.g. ``SA 4`` for averaging);
-    max_reply_bytes: a reply longer than this without a prompt is a protocol error.
+    max_reply_bytes: a reply longer than this without a prompt is a protocol error;
+    monitor_output: the discrete output the monitor condition switches (wired to the VAL
+    input ``arm.program_input``); monitor_command: sets the condition (fields ``axis``
+    ``FX``..``TZ``, ``op`` ``<``/``>``, ``counts`` the threshold in counts, ``output``);
+    monitor_clear: clears it. The controller evaluates monitor conditions itself (ATI manual
+    9620-05-CTL); their serial syntax has no public source: these defaults are the emulator's.
     """
 
     port: str
@@ -29,6 +34,9 @@ sync_quiet_s: at start-up, stale bytes are drained until the line is quiet this 
     sync_quiet_s: float = field(default=0.05, metadata=_POSITIVE)
     startup_commands: tuple[str, ...] = ("CD A", "CD R")
     max_reply_bytes: int = field(default=512, metadata={"min": 64})
+    monitor_output: int = field(default=1, metadata={"min": 1, "max": 16})
+    monitor_command: str = "MC {axis} {op} {counts} {output}"
+    monitor_clear: str = "MC"
 
     def __post_init__(self) -> None:
         for i, command in enumerate(self.startup_commands):

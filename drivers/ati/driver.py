@@ -35,7 +35,7 @@ from drivers.core.errors import (
     FineposError,
     ProtocolError,
 )
-from drivers.interfaces import Wrench, WrenchSensor
+from drivers.interfaces import MonitorCondition, Wrench, WrenchSensor
 
 logger = logging.getLogger(__name__)
 
@@ -118,6 +118,19 @@ class AtiWrenchSensor(WrenchSensor):
 
     def _bias(self) -> None:
         self._guarded(self._command, "SB")
+
+    def _set_monitor_condition(self, condition: MonitorCondition | None) -> None:
+        """``monitor_command`` with the threshold in counts (``monitor_clear`` for None)."""
+        cfg = self.config
+        if condition is None:
+            self._guarded(self._command, cfg.monitor_clear)
+            return
+        scale = cfg.counts_per_force if condition.axis.endswith("_n") else cfg.counts_per_torque
+        line = cfg.monitor_command.format(axis=condition.axis.split("_")[0].upper(),
+                                          op=condition.op,
+                                          counts=round(condition.limit * scale),
+                                          output=cfg.monitor_output)
+        self._guarded(self._command, line)
 
     def _query(self) -> Record:
         record = parse_query_reply("QR", self._exchange("QR"))

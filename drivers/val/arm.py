@@ -25,6 +25,7 @@ from __future__ import annotations
 import contextlib
 import logging
 import math
+import re
 from collections.abc import Iterator
 
 from drivers.core.errors import (
@@ -34,7 +35,7 @@ from drivers.core.errors import (
     ProtocolError,
 )
 from drivers.core.pose import Pose
-from drivers.interfaces import Arm
+from drivers.interfaces import Arm, Descent
 from drivers.safety import SafetyLimits
 from drivers.val.config import ValConfig
 from drivers.val.link import ExchangeInterrupted, ValLink
@@ -45,6 +46,18 @@ logger = logging.getLogger(__name__)
 
 # Questions answered in one start-up before giving up (the controller keeps asking).
 _MAX_BOOT_QUESTIONS = 8
+# A listed program line: its number, then the instruction.
+_LISTED_LINE = re.compile(r"^\s*\d+\s+(?P<text>.*\S)\s*$")
+# Where the arm stands after a descent that the input stopped at once (mm, deg): the start.
+_NOT_MOVED = 0.01
+
+
+class ProgramDownloadError(DeviceFaultError):
+    """A program VAL refused while it was entered, or that lists back otherwise."""
+
+
+def _normal(line: str) -> str:
+    return " ".join(line.replace(" ,", ",").replace(", ", ",").split()).casefold()
 
 
 class ValArm(Arm):
@@ -64,6 +77,9 @@ class ValArm(Arm):
         self.link.open()
         try:
             self._handshake()
+            self._loaded: dict[str, tuple[str, ...]] = {}
+            if self.config.programs:
+                self._load_programs(self.config.program_text())
         except BaseException:
             self.link.close()
             raise
@@ -91,6 +107,108 @@ class ValArm(Arm):
                 return answer
         raise ProtocolError(f"VAL start-up: unexpected question {question!r} (add it to "
                             "boot_answers to answer it)")
+
+    # -- programs on the controller ----------------------------------------------------------
+    @property
+    def runs_programs(self) -> bool:
+        return self.config.programs
+
+    def _load_programs(self, programs: dict[str, tuple[str, ...]]) -> None:
+        """Make the controller hold ``programs``: each is listed, and entered again where the
+        listing differs; then listed once more to check it.
+
+        Raises:
+            ProgramDownloadError: VAL refused a line, or a program lists back otherwise (one
+                line naming the program and the line).
+        """
+        for name, lines in programs.items():
+            if self._loaded.get(name) == lines:
+                continue
+            if self._listing(name) != [_normal(line) for line in lines]:
+                logger.info("VAL: entering program %s (%d lines)", name, len(lines))
+                self._enter(name, lines)
+                listed = self._listing(name)
+                expected = [_normal(line) for line in lines]
+                if listed != expected:
+                    bad = next((i for i, (a, b) in enumerate(zip(listed, expected,
+                                                                  strict=False), 1) if a != b),
+                               min(len(listed), len(expected)) + 1)
+                    wanted = lines[bad - 1] if bad <= len(lines) else "(none)"
+                    raise ProgramDownloadError(
+                        f"VAL program {name}: line {bad} {wanted!r} lists back as "
+                        f"{listed[bad - 1] if bad <= len(listed) else '(missing)'!r}")
+            self._loaded[name] = lines
+
+    def _listing(self, name: str) -> list[str] | None:
+        """The program's lines as VAL lists them (normalised), None when it has none."""
+        line = self.config.commands.listing.format(program=name)
+        with self._faulting(line):
+            reply = self.link.exchange(line, self.config.exchange_timeout_s,
+                                       echo=self.config.echo)
+        if reply.kind is ReplyKind.ERROR:
+            return None
+        self._check(reply, line, motion=False)
+        listed = []
+        for text in reply.lines:
+            match = _LISTED_LINE.match(text)
+            if match:
+                listed.append(_normal(match.group("text")))
+        return listed
+
+    def _enter(self, name: str, lines: tuple[str, ...]) -> None:
+        cmds = self.config.commands
+        timeout_s = self.config.exchange_timeout_s
+        reply = self.link.exchange(cmds.edit.format(program=name), timeout_s,
+                                   echo=self.config.echo)
+        for i, line in enumerate(lines, 1):
+            if reply.kind is not ReplyKind.QUESTION:
+                self._leave_editor()
+                raise ProgramDownloadError(f"VAL program {name}: line {i} {line!r}: the "
+                                           f"editor did not ask for it ({reply.kind.value}: "
+                                           f"{reply.message!r})")
+            reply = self.link.exchange(line, timeout_s, echo=self.config.echo)
+            refused = next((t.strip() for t in reply.lines
+                            if t.strip().startswith("*") and t.strip().endswith("*")), None)
+            if refused is not None:
+                self._leave_editor()
+                raise ProgramDownloadError(f"VAL program {name}: line {i} {line!r} refused: "
+                                           f"{refused}")
+        reply = self.link.exchange(cmds.edit_end, timeout_s, echo=self.config.echo)
+        self._check(reply, cmds.edit_end, motion=False)
+
+    def _leave_editor(self) -> None:
+        with contextlib.suppress(DeviceFaultError, DeviceTimeoutError, ProtocolError):
+            self.link.exchange(self.config.commands.edit_end, self.config.exchange_timeout_s,
+                               echo=self.config.echo)
+
+    def _guarded_descent(self, via: Pose, target: Pose, guard_speed_percent: float) -> Descent:
+        """``do set`` the two locations, then one ``execute`` of the descent program; the
+        reaction subroutine's text says the input stopped it, and a ``where`` then reads
+        where. An arm that did not move at all met an input already high: refused."""
+        cfg = self.config
+        with self._faulting("programs"):
+            self._load_programs(cfg.program_text(guard_speed_percent))
+        start = self._move_start if self._move_start is not None else self._read_pose()
+        for name, pose in (("fpa", via), ("fpd", target)):
+            self._command_without_output(cfg.commands.set_location.format(name=name,
+                                                                          **pose.as_dict()))
+        halts = self._halts
+        line = cfg.commands.execute.format(program="fpdesc")
+        with self._faulting(line):
+            reply = self._command(line, cfg.move_timeout_s)
+        if self._halts != halts:
+            raise MotionRejectedError("halted during the descent program")
+        contact = any(text.strip().casefold() == cfg.program_contact_text.casefold()
+                      for text in reply.lines)
+        if not contact:
+            return Descent(target, False)
+        pose = self._where().pose
+        if all(abs(a - b) <= _NOT_MOVED for a, b in zip(pose.as_dict().values(),
+                                                        start.as_dict().values(),
+                                                        strict=True)):
+            raise MotionRejectedError("the contact input was high before the descent: "
+                                      "nothing moved")
+        return Descent(pose, True)
 
     # -- exchanges -------------------------------------------------------------------------
     @contextlib.contextmanager

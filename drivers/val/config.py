@@ -19,7 +19,15 @@ _TEMPLATE_FIELDS: dict[str, dict[str, float]] = {
     "gripper_open": {},
     "gripper_close": {},
     "halt": {},
+    "edit": {"program": "p"},
+    "edit_end": {},
+    "listing": {"program": "p"},
+    "execute": {"program": "p"},
+    "set_location": {"name": "p", "x_mm": 1.0, "y_mm": 2.0, "z_mm": 3.0, "o_deg": 4.0,
+                     "a_deg": 5.0, "t_deg": 6.0},
 }
+# The fields a program line may use.
+_PROGRAM_FIELDS = {"input": 1001, "guard_speed": 25.0}
 
 
 @dataclass(frozen=True)
@@ -29,6 +37,10 @@ class ValCommands:
     where: read the pose (confirmed). speed: monitor speed, field ``percent`` (confirmed).
     move: absolute Cartesian move, fields ``x_mm y_mm z_mm o_deg a_deg t_deg`` (confirmed).
     gripper_open / gripper_close / halt: unconfirmed standard VAL II.
+    edit / edit_end / listing / execute (field ``program``): enter a program line by line,
+    end the editor, list a program, run it (VAL's EDIT, E, LISTP, EXECUTE: documented,
+    spelling unconfirmed); set_location: set a named location to a pose (field ``name`` and
+    the pose fields; VAL II's SET, unconfirmed).
     """
 
     where: str = "where"
@@ -38,6 +50,12 @@ class ValCommands:
     gripper_open: str = "do openi"
     gripper_close: str = "do closei"
     halt: str = "abort"
+    edit: str = "edit {program}"
+    edit_end: str = "e"
+    listing: str = "listp {program}"
+    execute: str = "ex {program}"
+    set_location: str = ("do set {name}=trans({x_mm:.2f},{y_mm:.2f},{z_mm:.2f},"
+                         "{o_deg:.3f},{a_deg:.3f},{t_deg:.3f})")
 
     def __post_init__(self) -> None:
         for name, sample in _TEMPLATE_FIELDS.items():
@@ -87,6 +105,21 @@ class ValConfig:
         20 mm / 10 deg (a judgement: a few hundred ms per segment). A target the controller
         refuses may then be refused after the first segments have moved.
     commands: the command templates.
+    programs: run the grasp's guarded descent as a program on the controller (one
+        ``execute`` per descent, stopped by ``REACTI`` on ``program_input``, the line that
+        carries the wrist sensor's monitor output); the programs are downloaded when the arm
+        connects, checked by listing them back and entered again where a listing differs; a
+        program VAL refuses, or one that lists back otherwise, fails the connection naming
+        the program and the line. false: one monitor command per move.
+    program_input: the VAL input line wired to the sensor's discrete output.
+    program_guard_speed: the program speed (percent) the descent program is entered with; a
+        descent asking for another enters it again.
+    program_contact_text: what the reaction subroutine types when the input stopped the arm.
+    program_lines: the programs, name -> lines (``str.format`` fields ``input`` and
+        ``guard_speed``). The descent program moves to location ``fpa`` at full speed, then to
+        ``fpd`` at the guard speed; it must open the jaws as it starts and arm ``REACTI`` on
+        the input before moving. Instruction spellings are VAL II's as documented,
+        unconfirmed on a wire: check them on the controller.
     """
 
     port: str
@@ -110,6 +143,22 @@ class ValConfig:
     max_segment_mm: float = field(default=0.0, metadata={"min": 0.0})
     max_segment_deg: float = field(default=0.0, metadata={"min": 0.0})
     commands: ValCommands = field(default_factory=ValCommands)
+    programs: bool = False
+    program_input: int = field(default=1001, metadata={"min": 1})
+    program_guard_speed: float = field(default=25.0, metadata={"min": 0.01, "max": 100.0})
+    program_contact_text: str = "FPCONTACT"
+    program_lines: dict[str, tuple[str, ...]] = field(default_factory=lambda: {
+        "fpstop": ("TYPE FPCONTACT", "STOP"),
+        "fpdesc": ("SPEED 100", "OPEN", "REACTI {input}, fpstop", "MOVES fpa",
+                   "SPEED {guard_speed:g}", "MOVES fpd", "IGNORE {input}"),
+    })
+
+    def program_text(self, guard_speed: float | None = None) -> dict[str, tuple[str, ...]]:
+        """The programs as entered on the controller (fields filled in)."""
+        speed = self.program_guard_speed if guard_speed is None else guard_speed
+        return {name: tuple(line.format(input=self.program_input, guard_speed=speed)
+                            for line in lines)
+                for name, lines in self.program_lines.items()}
 
     def __post_init__(self) -> None:
         if not self.port.strip():
@@ -125,3 +174,14 @@ class ValConfig:
                              f"above 0, got {self.max_segment_mm} / {self.max_segment_deg}")
         if any(not text.strip() for text in self.rejection_errors):
             raise ValueError("rejection_errors: entries must not be empty")
+        if self.programs and "fpdesc" not in self.program_lines:
+            raise ValueError("program_lines: the descent program 'fpdesc' is missing")
+        for name, lines in self.program_lines.items():
+            for i, line in enumerate(lines, 1):
+                try:
+                    text = line.format(**_PROGRAM_FIELDS)
+                except (KeyError, IndexError, ValueError) as exc:
+                    raise ValueError(f"program_lines.{name}[{i}]: {line!r} does not format "
+                                     f"with the fields input, guard_speed: {exc!r}") from exc
+                if not text.strip() or not text.isascii() or any(c in text for c in "\r\n"):
+                    raise ValueError(f"program_lines.{name}[{i}]: must be one ASCII line")

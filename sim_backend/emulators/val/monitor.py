@@ -123,12 +123,14 @@ class ValMonitor:
 
     Programs (``sim_backend.emulators.val.programs``): ``EDIT name`` asks for numbered lines
     (``  1? ``; each checked as it is entered, a refused one is asked again after the error
-    line) until ``E``; ``LISTP name`` prints ``.PROGRAM name``, the numbered lines and
-    ``.END``; ``EXECUTE name`` (``EX``) answers the ``*`` prompt at once and runs the program
-    on its own thread: ``on_program_end`` receives what it prints when it ends (its TYPE lines
-    or error, then the ``.`` prompt). While it runs only ``ABORT`` (stops the motion at once,
-    ends the program, then the prompt) and ``WHERE`` are taken; any other command gets
-    ``*Program already running*``. ``set_input(sig, source)`` wires an input line.
+    line) until ``E``; ``LISTP name`` prints ``PROGRAM name``, the numbered lines and
+    ``END`` (no line of a reply but the prompt starts with ``.``: a client sees a reply
+    complete at a ``.`` that starts a line); ``EXECUTE name`` (``EX``) answers the ``*``
+    prompt at once and runs the program on its own thread: ``on_program_end`` receives what
+    it prints when it ends (its TYPE lines or error, then the ``.`` prompt). While it runs
+    only ``ABORT`` (stops the motion at once, ends the program, then the prompt) and
+    ``WHERE`` are taken; any other command gets ``*Program already running*``.
+    ``set_input(sig, source)`` wires an input line.
     """
 
     def __init__(self, arm: Arm, kinematics: Puma260 | None = None,
@@ -269,13 +271,13 @@ class ValMonitor:
             lines.append(text.strip())
             return self._ask([], f"{len(lines) + 1:3d}? ", answer)
 
-        return self._ask([f".PROGRAM {name}"], f"{len(lines) + 1:3d}? ", answer)
+        return self._ask([f"PROGRAM {name}"], f"{len(lines) + 1:3d}? ", answer)
 
     def _list_program(self, name: str) -> bytes:
         if name not in self._programs:
             raise _Refusal(UNDEFINED_PROGRAM)
         body = [f"{i:3d}  {line}" for i, line in enumerate(self._programs[name], 1)]
-        return _text([f".PROGRAM {name}", *body, ".END"], PROMPT)
+        return _text([f"PROGRAM {name}", *body, "END"], PROMPT)
 
     def _execute(self, name: str) -> bytes:
         if name not in self._programs:
@@ -295,7 +297,7 @@ class ValMonitor:
             except FineposError as exc:
                 lines = [f"*{_refusal_text(exc)}*"]
             if not run.aborted.is_set():
-                self.on_program_end(_text(run.output + lines, PROMPT))
+                self.on_program_end(b"\r\n" + _text(run.output + lines, PROMPT))
 
         self._thread = threading.Thread(target=body, name=f"VAL program {name}", daemon=True)
         self._starting = self._thread.start

@@ -57,7 +57,7 @@ def set_location(session: Session, name: str, pose: Pose) -> None:
 def test_program_entered_line_by_line_lists_back(session):
     session.enter("fpdesc", DESCENT)
     listing = session("listp fpdesc").splitlines()
-    assert listing[0] == ".PROGRAM fpdesc" and listing[-2] == ".END" and listing[-1] == "."
+    assert listing[0] == "PROGRAM fpdesc" and listing[-2] == "END" and listing[-1] == "."
     assert [line.split(None, 1)[1] for line in listing[1:-2]] == DESCENT
 
 
@@ -68,7 +68,7 @@ def test_an_unknown_instruction_gets_the_error_and_the_same_line_again(session):
     reply = session("SPEED fast")
     assert "*Syntax error*" in reply and reply.endswith("  1? ")
     session("e")
-    assert session("listp p").splitlines()[1] == ".END"
+    assert session("listp p").splitlines()[1] == "END"
     assert "*Undefined program*" in session("listp nothing")
     assert "*Undefined program*" in session("ex nothing")
 
@@ -78,7 +78,7 @@ def test_execute_answers_the_star_prompt_and_ends_with_the_dot(session, arm):
     set_location(session, "fpd", target)
     session.enter("go", ["MOVES fpd", "TYPE FPDONE"])
     assert session("ex go") == "*"
-    assert session.ended.get(timeout=WAIT_S) == "FPDONE\r\n."
+    assert session.ended.get(timeout=WAIT_S) == "\r\nFPDONE\r\n."
     assert arm.pose().z_mm == pytest.approx(target.z_mm)
 
 
@@ -93,7 +93,7 @@ def test_a_reaction_stops_the_motion_where_the_input_went_high(session, arm):
     session.enter("fpstop", ["TYPE FPCONTACT", "STOP"])
     session.enter("fpdesc", DESCENT + ["TYPE FPEND"])
     assert session("ex fpdesc") == "*"
-    assert session.ended.get(timeout=WAIT_S) == "FPCONTACT\r\n."
+    assert session.ended.get(timeout=WAIT_S) == "\r\nFPCONTACT\r\n."
     assert start_z - arm.pose().z_mm == pytest.approx(10.0, abs=0.51)
 
 
@@ -106,7 +106,7 @@ def test_an_input_high_when_armed_reacts_before_any_motion(session, arm):
     session.enter("fpstop", ["TYPE FPCONTACT", "STOP"])
     session.enter("fpdesc", DESCENT)
     session("ex fpdesc")
-    assert session.ended.get(timeout=WAIT_S) == "FPCONTACT\r\n."
+    assert session.ended.get(timeout=WAIT_S) == "\r\nFPCONTACT\r\n."
     assert arm.moves == []
 
 
