@@ -186,25 +186,63 @@ def add_command(subparsers, name: str, *, help: str, description: str) -> argpar
 
 
 def add_record_option(parser: argparse.ArgumentParser) -> None:
-    """``--record FILE.mcap``: record the run for Foxglove and ``finepos replay``."""
+    """``--record FILE.mcap``: record the run for Foxglove and ``finepos replay``; and
+    ``--live [PORT]``."""
     parser.add_argument("--record", metavar="FILE.mcap",
                         help="record every look (frame, overlays, record, tool pose) and the "
                              "grasp's wrench readings as MCAP (Foxglove; finepos replay)")
+    add_live_option(parser)
+
+
+def port_number(text: str) -> int:
+    """An argparse type: a TCP port, 0..65535 (0: any free one)."""
+    try:
+        value = int(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"expected a port number, got {text!r}") from None
+    if not 0 <= value <= 65535:
+        raise argparse.ArgumentTypeError(f"expected a port 0..65535, got {value}")
+    return value
+
+
+def add_live_option(parser: argparse.ArgumentParser) -> None:
+    """``--live [PORT]``: serve the run live to Foxglove (WebSocket on 127.0.0.1)."""
+    from controller.recording.live import DEFAULT_PORT
+
+    parser.add_argument("--live", type=port_number, nargs="?", const=DEFAULT_PORT, metavar="PORT",
+                        help="serve the run live for Foxglove (hand camera, overlays, tool pose, "
+                             "wrench, iteration records) as a Foxglove WebSocket on 127.0.0.1 "
+                             f"at PORT (default {DEFAULT_PORT}; 0: any free port)")
 
 
 @contextlib.contextmanager
 def run_recorder(args, max_runs: int | None = None):
-    """Context manager: the RunRecorder at ``--record`` (None without it), closed at the end.
+    """Context manager: what records the run: the RunRecorder at ``--record`` (its first
+    ``max_runs`` runs), the live view of ``--live`` (every run), both, or None; closed at the
+    end.
 
-    The path is printed on stderr.
+    The path and the live view's address are printed on stderr.
     """
     path = getattr(args, "record", None)
-    if path is None:
-        yield None
-        return
-    with RunRecorder(path, max_runs=max_runs) as recorder:
-        print(f"recording: {path}", file=sys.stderr)
-        yield recorder
+    port = getattr(args, "live", None)
+    with contextlib.ExitStack() as stack:
+        recorders = []
+        if port is not None:
+            from controller.recording.live import LiveServer
+
+            live = stack.enter_context(LiveServer(port))
+            print(f"live: {live.url} (Foxglove: Open connection, Foxglove WebSocket)",
+                  file=sys.stderr)
+            recorders.append(live)
+        if path is not None:
+            recorders.append(stack.enter_context(RunRecorder(path, max_runs=max_runs)))
+            print(f"recording: {path}", file=sys.stderr)
+        if len(recorders) > 1:
+            from controller.recording.live import Tee
+
+            yield Tee(*recorders)
+        else:
+            yield recorders[0] if recorders else None
 
 
 def add_timing_option(parser: argparse.ArgumentParser, default: str | None = "realistic") -> None:

@@ -73,6 +73,7 @@ import sys
 from controller.commands.common import (
     ALL_PARTS,
     add_config_option,
+    add_live_option,
     add_system_option,
     add_timing_option,
     part_name_or_all,
@@ -150,7 +151,7 @@ def run(args) -> int:
 def _evaluate_parts(args, config) -> int:
     """``--part all``: ``parts_table.run_parts_table`` with the options; prints the Markdown
     table (every row's JSON report to ``--json``)."""
-    for option in ("model", "log", "states", "record", "mounts"):
+    for option in ("model", "log", "states", "record", "live", "mounts"):
         if getattr(args, option, None) is not None:
             raise ConfigError(f"--{option}: not with --part all (every part is trained and "
                               "tested on its own)")
@@ -173,7 +174,8 @@ def _evaluate_parts(args, config) -> int:
 def _evaluate_randomized(args, config) -> int:
     """``--randomize``: ``randomized.evaluate_randomized`` with the options; prints the JSON
     report."""
-    for option in ("model", "log", "states", "record", "mounts", "lighting", "teach_lighting"):
+    for option in ("model", "log", "states", "record", "live", "mounts", "lighting",
+                   "teach_lighting"):
         if getattr(args, option, None) is not None:
             raise ConfigError(f"--{option.replace('_', '-')}: not with --randomize (every cell "
                               "and its light are drawn)")
@@ -191,7 +193,7 @@ def _evaluate_randomized(args, config) -> int:
 
 def _evaluate_mounts(args, config) -> int:
     """``--mounts N``: ``mounts.evaluate_mounts`` with the options; prints the JSON report."""
-    for option in ("model", "log", "states", "record"):
+    for option in ("model", "log", "states", "record", "live"):
         if getattr(args, option, None) is not None:
             raise ConfigError(f"--{option}: not with --mounts (every camera is set up, trained "
                               "and tested on its own)")
@@ -230,6 +232,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                              "wrench) as MCAP for Foxglove and finepos replay")
     parser.add_argument("--record-trials", type=positive_int, default=3, metavar="N",
                         help="how many trials --record keeps (default 3)")
+    add_live_option(parser)
     parser.add_argument("--no-grasp", action="store_true", help="skip the grasp after positioning")
     parser.add_argument("--rezero", action="store_true",
                         help="first re-zero the model at the taught pose in the trials' light "

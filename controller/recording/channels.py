@@ -28,6 +28,7 @@ from __future__ import annotations
 import json
 import math
 import threading
+from collections.abc import Callable
 from typing import Any
 
 import cv2
@@ -46,7 +47,7 @@ from controller.recording.overlay import look_texts, overlay_of, to_annotations
 from controller.systems.estimator import TranslationEstimate
 from drivers.core.errors import FineposError
 from drivers.core.pose import Pose
-from drivers.interfaces import Frame, Wrench
+from drivers.interfaces import Frame, Wrench, WrenchSensor
 
 IMAGE_TOPIC = "/hand_camera/image"
 ANNOTATIONS_TOPIC = "/hand_camera/annotations"
@@ -208,3 +209,23 @@ class CellChannels:
         with self._lock:
             self._json[GUARD_TOPIC].log(to_json_line(result.as_dict()),
                                         log_time=self._time(ns(t_s)))
+
+
+class RecordingSensor:
+    """Passes everything to the wrapped sensor; hands what ``read`` returns to
+    ``recorder.wrench`` (a ``RunRecorder`` or ``LiveServer``)."""
+
+    def __init__(self, sensor: WrenchSensor, recorder: Any,
+                 clock: Callable[[], float] | None) -> None:
+        self._sensor = sensor
+        self._recorder = recorder
+        self._clock = clock
+
+    def read(self) -> Wrench:
+        """The wrapped sensor's reading, also written to the recording (cell-clock time)."""
+        wrench = self._sensor.read()
+        self._recorder.wrench(wrench, self._clock() if self._clock is not None else None)
+        return wrench
+
+    def __getattr__(self, name: str) -> Any:
+        return getattr(self._sensor, name)

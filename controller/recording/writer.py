@@ -28,7 +28,7 @@ from foxglove import Context
 from foxglove.mcap import MCAPCompression, MCAPWriteOptions
 
 from controller.loop.record import IterationRecord
-from controller.recording.channels import CellChannels, RecordingError
+from controller.recording.channels import CellChannels, RecordingError, RecordingSensor
 from controller.recording.overlay import Overlay
 from controller.systems.estimator import TranslationEstimate
 from drivers.core.pose import Pose
@@ -215,26 +215,7 @@ class RunRecorder:
                          clock: Callable[[], float] | None = None) -> WrenchSensor:
         """``sensor`` with every ``read()`` also recorded (for the guarded grasp), stamped by
         ``clock`` (cell seconds; default ``time.monotonic``)."""
-        return _RecordingSensor(sensor, self, clock)
-
-
-class _RecordingSensor:
-    """Passes everything to the wrapped sensor; records what ``read`` returns."""
-
-    def __init__(self, sensor: WrenchSensor, recorder: RunRecorder,
-                 clock: Callable[[], float] | None) -> None:
-        self._sensor = sensor
-        self._recorder = recorder
-        self._clock = clock
-
-    def read(self) -> Wrench:
-        """The wrapped sensor's reading, also written to the recording (cell-clock time)."""
-        wrench = self._sensor.read()
-        self._recorder.wrench(wrench, self._clock() if self._clock is not None else None)
-        return wrench
-
-    def __getattr__(self, name: str) -> Any:
-        return getattr(self._sensor, name)
+        return RecordingSensor(sensor, self, clock)
 
 
 def overlay_from_record(entry: dict[str, Any]) -> Overlay:

@@ -48,6 +48,24 @@ class TcpConfig:
 
 
 @dataclass(frozen=True)
+class LiveConfig:
+    """The live view (``service.live``): the cell's channels over the Foxglove WebSocket
+    protocol (``controller.recording.live``), for Foxglove to connect to.
+
+    port: 1..65535 (8765, Foxglove's default); address: the address it binds to (an IP address;
+    127.0.0.1 by default); any other than loopback needs ``service.tcp`` (its token_file), and
+    every connection then sends that token (``Authorization: Bearer <token>`` or
+    ``?token=<token>`` in the URL).
+    """
+
+    port: int = field(default=8765, metadata={"min": 1, "max": 65535})
+    address: str = "127.0.0.1"
+
+    def __post_init__(self) -> None:
+        is_loopback(self.address, "address")
+
+
+@dataclass(frozen=True)
 class ServiceConfig:
     """Config section ``service``: the long-running controller (``finepos serve``).
 
@@ -78,8 +96,8 @@ class ServiceConfig:
     tcp: the optional loopback TCP listener (None: no network listener);
     record_dir: record every positioning job as ``<job>.mcap`` in this folder
     (``controller.recording``; None: no recordings);
-    live_view_port: serve the annotated hand-camera image as MJPEG on 127.0.0.1 at this port
-    (``controller.recording.live``; None: off);
+    live: the live view for Foxglove (hand camera, overlays, tool pose, wrench, iteration
+    records; ``LiveConfig``; None: off);
     metrics_port: serve Prometheus metrics (text format) over HTTP at this port
     (``controller.service.metrics``; None: off);
     metrics_address: the address the metrics port binds to (an IP address; 127.0.0.1 by
@@ -110,7 +128,7 @@ class ServiceConfig:
     abort_wait_s: float = field(default=0.05, metadata={**_POSITIVE, "max": 10.0})
     tcp: TcpConfig | None = None
     record_dir: str | None = None
-    live_view_port: int | None = field(default=None, metadata={"min": 1, "max": 65535})
+    live: LiveConfig | None = None
     metrics_port: int | None = field(default=None, metadata={"min": 1, "max": 65535})
     metrics_address: str = "127.0.0.1"
     self_check_at_start: bool = False
@@ -121,6 +139,10 @@ class ServiceConfig:
         if not is_loopback(self.metrics_address, "metrics_address") and self.tcp is None:
             raise ValueError(f"metrics_address: {self.metrics_address} is not loopback: that "
                              "needs service.tcp.token_file (scrapes send its token)")
+        if self.live is not None and not is_loopback(self.live.address, "live.address") \
+                and self.tcp is None:
+            raise ValueError(f"live.address: {self.live.address} is not loopback: that needs "
+                             "service.tcp.token_file (live clients send its token)")
         if self.reconnect_max_s < self.reconnect_initial_s:
             raise ValueError("reconnect_max_s must be at least reconnect_initial_s, got "
                              f"{self.reconnect_max_s} / {self.reconnect_initial_s}")

@@ -145,7 +145,7 @@ class Service:
             self._log.subscribe(self._on_record)
             logger.info("iteration records go to %s", log_path)
             stack.callback(self._cell.close)
-            self._live_view = self._start_live_view(stack)
+            self._live_view = self._start_live_view(stack, token)
             self._start_metrics(stack, token)
             self._server = stack.enter_context(
                 ControlServer(self.socket_path, cfg.service, policy, self, token))
@@ -587,19 +587,15 @@ class Service:
             job.done.wait()
         return {"job": job.report()}
 
-    def _start_live_view(self, stack: contextlib.ExitStack):
-        """With ``service.live_view_port``: the annotated hand-camera image of every look as
-        MJPEG on 127.0.0.1 (closed with the service); None otherwise."""
-        port = self.config.service.live_view_port
-        if port is None:
+    def _start_live_view(self, stack: contextlib.ExitStack, token: str | None):
+        """With ``service.live``: every job's looks, poses, readings and records served to
+        Foxglove over its WebSocket protocol (closed with the service); None otherwise."""
+        cfg = self.config.service.live
+        if cfg is None:
             return None
-        from controller.recording.live import LiveView
-        from drivers.camera.mjpeg_server import MjpegServer
+        from controller.recording.live import LiveServer
 
-        live = LiveView()
-        server = stack.enter_context(MjpegServer(live, port=port))
-        logger.info("live view on %s", server.stream_url)
-        return live
+        return stack.enter_context(LiveServer(cfg.port, cfg.address, token=token))
 
     def _start_metrics(self, stack: contextlib.ExitStack, token: str | None) -> None:
         """With ``service.metrics_port``: Prometheus metrics fed by the event stream, served on

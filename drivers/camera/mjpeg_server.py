@@ -1,9 +1,9 @@
 """An MJPEG-over-HTTP server on 127.0.0.1 serving the frames of any Camera, as network cameras do.
 
-The wire format the OpenCV camera driver reads (``drivers.camera.driver``), written once here:
-the service's live view (``controller.recording.live``, ``service.live_view_port``) serves its
-annotated looks with it, and the camera emulator (``finepos sim camera-stream``,
-``sim_backend.emulators.mjpeg``) serves the simulated hand camera with it.
+The wire format the OpenCV camera driver reads (``drivers.camera.driver``), written once here;
+the camera emulator (``finepos sim camera-stream``, ``sim_backend.emulators.mjpeg``) serves the
+simulated hand camera with it. (The cell's live view is Foxglove's protocol:
+``controller.recording.live``.)
 
 Routes:
 

@@ -1,37 +1,84 @@
-"""Live view: the annotated latest look, served by the MJPEG camera-stream server."""
+"""Live view: the loop's looks served over the Foxglove WebSocket protocol, as recorded."""
 
-import urllib.request
+import argparse
+import time
 
-import cv2
-import numpy as np
+import pytest
+from mcap.reader import make_reader
 
+from controller.commands.common import add_live_option
 from controller.loop.positioning import LoopConfig, PositioningLoop
-from controller.recording.live import LiveView, Tee
+from controller.recording.channels import (
+    ANNOTATIONS_TOPIC,
+    IMAGE_TOPIC,
+    ITERATION_TOPIC,
+    TF_TOPIC,
+    RecordingError,
+)
+from controller.recording.live import BACKLOG_MESSAGES, DEFAULT_PORT, LiveServer, Tee
 from controller.recording.writer import RunRecorder
-from drivers.camera.mjpeg_server import MjpegServer
 from drivers.core.pose import ToolStep
 from tests.controller.loop.loop_fixtures import NOMINAL, TruthEstimator
+from tests.controller.recording.foxglove_client import FoxgloveClient
 from tests.mocks.fakes import FakeArm, FakeCamera
 
+TOPICS = (IMAGE_TOPIC, ANNOTATIONS_TOPIC, ITERATION_TOPIC, TF_TOPIC)
 
-def test_the_live_view_serves_the_annotated_last_look_over_mjpeg(tmp_path):
+
+def _run(recorder) -> None:
     arm = FakeArm(start=NOMINAL.moved_in_tool_frame(ToolStep(12.0, -8.0, 0.0, 20.0)))
     arm.connect()
     arm.activate()
     cam = FakeCamera()
     cam.connect()
-    live = LiveView(scale=2)
-    before = live.grab().image.copy()
-    with RunRecorder(tmp_path / "r.mcap") as recording:
-        PositioningLoop(arm, cam, LoopConfig(), recorder=Tee(recording, live)).run(
-            TruthEstimator(arm))
-    assert live.looks == recording.looks == 3
-    with MjpegServer(live) as server:
-        with urllib.request.urlopen(server.snapshot_url, timeout=5) as reply:
-            served = cv2.imdecode(np.frombuffer(reply.read(), np.uint8), cv2.IMREAD_COLOR)
-    assert served.shape == (288, 384, 3) == before.shape
-    # the scripted part sits at (96, 72): the red centre marker is drawn there
-    b, g, r = (served[:, :, i].astype(int) for i in range(3))
-    ys, xs = np.nonzero((r > 180) & (g < 110) & (b < 110))
-    assert abs(xs.mean() - (96.5 * 2 - 0.5)) < 2 and abs(ys.mean() - (72.5 * 2 - 0.5)) < 2
-    assert not (before[:, :, 0] > 180).any()  # nothing drawn before the first look
+    PositioningLoop(arm, cam, LoopConfig(), recorder=recorder).run(TruthEstimator(arm))
+
+
+def _subscribed(live: LiveServer, **options) -> FoxgloveClient:
+    client = FoxgloveClient(live.url, **options)
+    client.wait_channels(TOPICS)
+    client.subscribe(TOPICS)
+    time.sleep(0.2)  # the subscription reaches the server
+    return client
+
+
+def test_a_client_sees_what_the_recording_holds(tmp_path):
+    with LiveServer(port=0) as live, _subscribed(live) as client:
+        with RunRecorder(tmp_path / "r.mcap") as recording:
+            _run(Tee(recording, live))
+        assert live.looks == recording.looks == 3
+        seen = client.receive_until(lambda got: len(got) >= 3 * 3 + 2)
+    with open(tmp_path / "r.mcap", "rb") as f:
+        recorded = [(c.topic, m.log_time) for _, c, m in make_reader(f).iter_messages()]
+    assert [(m.topic, m.log_time_ns) for m in seen] == recorded
+
+
+def test_a_client_that_never_reads_holds_up_neither_the_loop_nor_the_others():
+    with LiveServer(port=0) as live, _subscribed(live, max_queue=1), \
+            _subscribed(live) as watching:
+        started = time.monotonic()
+        assert 4 * 300 > BACKLOG_MESSAGES
+        for _ in range(100):  # 300 looks, 1200 messages: more than a client's queue holds
+            _run(live)
+        assert time.monotonic() - started < 30.0
+        watching.receive_until(lambda got: sum(m.topic == ITERATION_TOPIC for m in got)
+                               >= 300, timeout_s=20.0)
+
+
+def test_a_port_in_use_is_one_line():
+    with LiveServer(port=0) as first:
+        with pytest.raises(RecordingError, match=f"live view on 127.0.0.1:{first.port}: "
+                                                 "cannot listen"):
+            LiveServer(port=first.port)
+    with pytest.raises(RecordingError, match="needs the TCP control token"):
+        LiveServer(port=0, address="0.0.0.0")
+
+
+def test_the_live_option_takes_an_optional_port():
+    parser = argparse.ArgumentParser()
+    add_live_option(parser)
+    assert parser.parse_args([]).live is None
+    assert parser.parse_args(["--live"]).live == DEFAULT_PORT
+    assert parser.parse_args(["--live", "9000"]).live == 9000
+    with pytest.raises(SystemExit):
+        parser.parse_args(["--live", "70000"])
