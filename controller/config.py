@@ -1,11 +1,16 @@
-"""The root configuration file (``finepos.yaml``): every section, strictly typed.
+"""The cell configuration file (``finepos.yaml``): every section, strictly typed.
 
 Sections: ``arm``, ``camera``, ``wrench`` (backend ``type`` plus that backend's options, see
-``controller.devices``), ``scene`` (the simulated cell), ``safety``, ``perception``,
-``controller``, ``service`` (``finepos serve``), ``timing`` (the realistic cell's durations,
-``drivers.core.timing``). Unknown keys, wrong types and out-of-range
-values fail at load with the full key path. With no file, every default applies: the simulated
-cell, good light, the cube.
+``controller.devices``), ``scene`` (the simulated cell), ``safety``, ``controller``,
+``service`` (``finepos serve``), ``timing`` (the realistic cell's durations,
+``drivers.core.timing``). Unknown keys, wrong types and out-of-range values fail at load with
+the full key path. With no file, every default applies: the simulated cell, good light, the
+cube.
+
+The perception settings and the loop's tuned keys are not in this file: they are the recipe
+(``controller.recipe``), kept in the model file. A file that sets one is refused with a line
+naming the key's home. ``FineposConfig.perception`` and the recipe keys of
+``controller.loop`` hold the recipe a command runs with (``with_recipe``).
 
 The ``scene`` section is the simulator's: it is read (into
 ``sim_backend.cell.scene_config.SceneConfig``, through ``controller.simulated``) only when a
@@ -18,18 +23,13 @@ from __future__ import annotations
 import dataclasses
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import TYPE_CHECKING, Any, Literal
+from typing import TYPE_CHECKING, Any
 
-from calibration_free.baselines.align.model import AlignConfig
-from calibration_free.baselines.hough.model import HoughConfig
-from calibration_free.baselines.pca.model import PcaConfig
-from calibration_free.gabor import GaborConfig
-from calibration_free.localise import DEFAULT_CAMERA_GAMMA
-from calibration_free.training import NN2_HIDDEN
 from controller import simulated
 from controller.devices import DeviceSection, parse_device_section
 from controller.loop.grasp import GraspConfig
 from controller.loop.positioning import LoopConfig
+from controller.recipe import PerceptionConfig, Recipe, refuse_recipe_keys
 from controller.service.config import ServiceConfig
 from controller.teach.spacenav import TeachConfig
 from controller.teach.state_folder import check_part
@@ -118,63 +118,9 @@ class ControllerConfig:
 
 
 @dataclass(frozen=True)
-class PerceptionConfig:
-    """Config section ``perception``: the Gabor filter bank and the networks.
-
-    nn2_hidden: hidden layer sizes of NN2, 1 to 8 layers of 1 to 4096 units (NN1 is the paper's
-    2-3-2); nn2_weight_decay: L2
-    penalty on NN2's weights, so it interpolates between the grid's angles (unset: 1e-2, and
-    1e-3 for a part without symmetry, ``calibration_free.training.default_nn2_weight_decay``);
-    nn2_widen_px: NN2 also learns from four copies of each ROI widened on one side by up to
-    this many pixels, as a lamp-lit flank widens the outline (0: none; unset: 1 px for a part
-    of kappa 6 or more, the nut, and none for the others,
-    ``calibration_free.training.default_nn2_widen_px``);
-    localisation_channel: the image the part is localised in (``max``: normalised max(R,G,B),
-    the paper's; ``saturation``: unchanged by light and shadow for a coloured part; ``auto``:
-    whichever separates part and table better in the training images); pca / hough: the
-    baseline systems' settings (``finepos evaluate --system pca|hough``); align: the
-    image-alignment servo's (``--system align``); seed: training seed;
-    nn1_uses_nn2_set: also train NN1 on the NN2 grid's images (they cost no extra motion and
-    make NN1 precise near the nominal pose, where the loop's fixed point is);
-    axis: for an elongated part (screw, ledge) the turn near the taught pose is read from the
-    silhouette's long axis (``calibration_free.axis``; with ``edge_coverage: colour`` the
-    silhouette of the part's share of each pixel, ``FrontEnd.coverage_roi``; false: NN2
-    alone);
-    edge_coverage: how the part's centre reads the pixels along its outline: ``colour``, by
-    the table's share of each pixel's colour (unchanged by how a lamp lights the part's
-    edges, ``calibration_free.localise.colour_centre``), or ``grey``, by the localisation
-    channel's grey level; camera_gamma: the camera's output gamma (``colour`` reads in linear
-    light: a delivered grey level g is (g / 255) ** camera_gamma; 2.2 for an sRGB-like
-    camera, 1 for a linear one).
-    """
-
-    gabor: GaborConfig = GaborConfig()
-    nn2_hidden: tuple[int, ...] = field(default=NN2_HIDDEN, metadata={"min": 1, "max": 4096})
-    nn2_weight_decay: float | None = field(default=None, metadata={"min": 0.0})
-    nn2_widen_px: float | None = field(default=None, metadata={"min": 0.0, "max": 5.0})
-    localisation_channel: Literal["max", "saturation", "auto"] = "auto"
-    pca: PcaConfig = PcaConfig()
-    hough: HoughConfig = HoughConfig()
-    align: AlignConfig = AlignConfig()
-    seed: int = 0
-    nn1_uses_nn2_set: bool = True
-    axis: bool = True
-    edge_coverage: Literal["colour", "grey"] = "colour"
-    camera_gamma: float = field(default=DEFAULT_CAMERA_GAMMA, metadata={"min": 1.0, "max": 3.0})
-
-    def __post_init__(self) -> None:
-        if not 1 <= len(self.nn2_hidden) <= 8:  # with <= 4096 units each: fits in memory
-            raise ValueError(f"nn2_hidden: 1 to 8 hidden layers, got {len(self.nn2_hidden)}")
-
-    @property
-    def edge_gamma(self) -> float:
-        """The gamma the part's edge is read with (``FrontEnd.edge_gamma``): 0 for ``grey``."""
-        return float(self.camera_gamma) if self.edge_coverage == "colour" else 0.0
-
-
-@dataclass(frozen=True)
 class FineposConfig:
-    """The whole configuration: one field per section, and the file it came from.
+    """The whole configuration: one field per section, the recipe in use (``perception`` and
+    the recipe keys of ``controller.loop``), and the file it came from.
 
     scene: the simulated cell, a ``SceneConfig`` when a device is simulated (else the section
     unread, ``controller.simulated.UnreadScene``).
@@ -192,12 +138,18 @@ class FineposConfig:
     source: str = "<defaults>"
 
 
-SECTIONS = ("arm", "camera", "wrench", "scene", "safety", "perception", "controller", "service",
-            "timing")
+SECTIONS = ("arm", "camera", "wrench", "scene", "safety", "controller", "service", "timing")
 
 
 def config_from_mapping(data: dict[str, Any], source: str = "<mapping>") -> FineposConfig:
-    """Validate a whole root mapping (e.g. parsed YAML) into a FineposConfig."""
+    """Validate a whole root mapping (e.g. parsed YAML) into a FineposConfig, with the default
+    recipe.
+
+    Raises:
+        ConfigError: one line naming the key: unknown, mistyped or out of range, or a recipe
+            key (its home named).
+    """
+    refuse_recipe_keys(data)
     unknown = sorted(str(k) for k in data if k not in SECTIONS)
     if unknown:
         raise ConfigError(f"{unknown[0]}: unknown section (allowed: {', '.join(SECTIONS)})")
@@ -208,7 +160,6 @@ def config_from_mapping(data: dict[str, Any], source: str = "<mapping>") -> Fine
         scene=simulated.scene_section(
             data.get("scene"), any(d.type == "sim" for d in devices.values())),
         safety=from_mapping(SafetyLimits, data.get("safety"), "safety"),
-        perception=from_mapping(PerceptionConfig, data.get("perception"), "perception"),
         controller=from_mapping(ControllerConfig, data.get("controller"), "controller"),
         service=from_mapping(ServiceConfig, data.get("service"), "service"),
         timing=from_mapping(TimingConfig, data.get("timing"), "timing"),
@@ -225,6 +176,18 @@ def load_config(path: str | Path | None) -> FineposConfig:
     except ConfigError as exc:
         msg = str(exc)
         raise ConfigError(msg if msg.startswith(str(path)) else f"{path}: {msg}") from exc
+
+
+def with_recipe(config: FineposConfig, recipe: Recipe) -> FineposConfig:
+    """``config`` running ``recipe``: its perception settings and loop keys."""
+    controller = dataclasses.replace(config.controller,
+                                     loop=recipe.apply_loop(config.controller.loop))
+    return dataclasses.replace(config, perception=recipe.perception, controller=controller)
+
+
+def recipe_of(config: FineposConfig) -> Recipe:
+    """The recipe ``config`` runs (what training writes into the model file)."""
+    return Recipe(perception=config.perception, loop=config.controller.loop)
 
 
 def is_simulated(config: FineposConfig) -> bool:

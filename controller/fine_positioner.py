@@ -4,7 +4,8 @@
 the config, and an optional iteration log. The CLI creates one per command; the service keeps
 one for its lifetime. Files live in its state folder, the part's folder under
 ``controller.paths.state_dir`` (``controller.teach.state_folder``): ``cell.json`` (teach-in),
-``datasets/<set>.npz``, ``model-<system>.<suffix>``.
+``datasets/<set>.npz``, ``model-<system>.<suffix>``. A model file carries the recipe it was
+trained with (``controller.recipe``); the loop runs with that recipe's loop keys.
 """
 
 from __future__ import annotations
@@ -19,6 +20,7 @@ import numpy as np
 from calibration_free.baselines.align.rezero import rezero_align
 from calibration_free.dataset import Dataset
 from calibration_free.rezero import CLIPPED_WARN_SHARE, rezero
+from controller.config import recipe_of
 from controller.loop.grasp import GraspResult, guarded_grasp
 from controller.loop.iteration_log import IterationLog
 from controller.loop.positioning import (
@@ -28,6 +30,7 @@ from controller.loop.positioning import (
     mean_scatter,
     step_scatter,
 )
+from controller.recipe import Recipe, recipe_of_model, with_recipe_stored
 from controller.systems.base import TrainedModel
 from controller.systems.estimator import full_step
 from controller.systems.registry import SYSTEMS
@@ -184,8 +187,13 @@ class FinePositioner:
         data.save(self.dataset_path(name))
         return data
 
-    def train(self, system: str = "gabor") -> TrainedModel:
-        """Train ``system`` on the stored nn1 and nn2 sets, store its model and use it.
+    def train(self, system: str = "gabor", recipe: Recipe | None = None) -> TrainedModel:
+        """Train ``system`` on the stored nn1 and nn2 sets with ``recipe``, store its model
+        (the recipe written into it) and use it.
+
+        Args:
+            recipe: the perception and loop settings (None: the recipe of ``system``'s current
+                model file; where there is none, the one this positioner's config runs).
 
         Raises:
             DatasetError: a set is missing or damaged.
@@ -195,12 +203,33 @@ class FinePositioner:
         nn1 = Dataset.load(self.dataset_path("nn1"))
         nn2 = Dataset.load(self.dataset_path("nn2"))
         impl = SYSTEMS[system]
-        model = impl.train(nn1, nn2, state, self.config.perception)
+        recipe = recipe if recipe is not None else self._current_recipe(system)
+        model = impl.train(nn1, nn2, state, recipe.perception)
+        model = dataclasses.replace(model, model=with_recipe_stored(model.model, recipe))
         impl.save(model, self.model_path(system))
         self._model = model
         logger.info("trained %s on %d images in %.2f s -> %s", system, model.train_images,
                     model.train_seconds, self.model_path(system))
         return model
+
+    def _current_recipe(self, system: str) -> Recipe:
+        """The recipe of ``system``'s model file where one is stored and readable, else the one
+        the config runs."""
+        file = self.model_path(system)
+        if file.is_file():
+            try:
+                return recipe_of_model(SYSTEMS[system].load(file).model)
+            except FineposError as exc:
+                logger.warning("%s: its recipe cannot be read (%s); training with the "
+                               "config's", file, exc)
+        return recipe_of(self.config)
+
+    def loop_config(self, model: TrainedModel | None = None) -> LoopConfig:
+        """The loop's settings for ``model`` (default: the model in use): the cell config's
+        ``controller.loop`` with the recipe keys of the model's recipe."""
+        model = model if model is not None else self._model
+        loop = self.config.controller.loop
+        return loop if model is None else recipe_of_model(model.model).apply_loop(loop)
 
     def load_model(self, path: str | Path | None = None, system: str = "gabor") -> TrainedModel:
         """Load and use a model file (default: ``system``'s stored model), checked to be
@@ -267,7 +296,7 @@ class FinePositioner:
                              or default_range(model.model.kappa, heading_step_deg))
         self.move_to(self.state().nominal_pose)
         images = [self.devices.camera.grab().image for _ in range(frames)]
-        loop = self.config.controller.loop
+        loop = self.loop_config(model)
         average, scatter = 1, None
         if system == "gabor":
             estimator = SYSTEMS[system].estimator(model)
@@ -338,7 +367,7 @@ class FinePositioner:
         truth = self.devices.ground_truth if self.devices.cell is not None else None
         nn1_grid = self.config.controller.acquisition.nn1
         self._loop = PositioningLoop(self.devices.arm, self.devices.camera,
-                                     self.config.controller.loop, self.log, truth,
+                                     self.loop_config(), self.log, truth,
                                      recorder=self.recorder,
                                      reach_mm=nn1_grid.a_mm * math.sqrt(2.0))
         carry = then_grasp and self.config.controller.grasp.carry_final_step
@@ -419,7 +448,7 @@ def _warn_if_too_noisy(loop: LoopConfig, scatter: tuple[float, float, float] | N
         return
     logger.warning("rezero: single frames at the taught pose scatter by %.3f / %.3f mm and "
                    "%.2f deg in this light; a settling look's %d frames still leave %.3f mm "
-                   "and %.2f deg in its mean step, above controller.loop.settle_sem_mm / "
+                   "and %.2f deg in its mean step, above the recipe's loop.settle_sem_mm / "
                    "settle_sem_deg: lower the camera's gain "
                    "(docs/decisions/0013-expose-for-the-part.md)",
                    *scatter, loop.settle_max_frames, max(left[0], left[1]), left[2])

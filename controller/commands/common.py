@@ -9,8 +9,9 @@ import time
 from pathlib import Path
 
 from controller import simulated
-from controller.config import cell_part, load_config, with_part
+from controller.config import cell_part, load_config, with_part, with_recipe
 from controller.loop.iteration_log import IterationLog
+from controller.recipe import load_recipe
 from controller.recording.writer import RunRecorder
 from controller.systems.registry import SYSTEMS
 from controller.teach.state_folder import StateFolder
@@ -58,6 +59,13 @@ def add_config_file_option(parser: argparse.ArgumentParser) -> None:
     """``--config FILE``: the root config (default: the simulated cell, all defaults)."""
     parser.add_argument("--config", metavar="FILE",
                         help="finepos YAML config (default: the simulated cell, all defaults)")
+
+
+def add_recipe_option(parser: argparse.ArgumentParser) -> None:
+    """``--recipe FILE``: the perception and loop settings the command trains with."""
+    parser.add_argument("--recipe", metavar="FILE",
+                        help="train with this recipe (YAML: perception and loop sections, "
+                             "docs/configuration.md#recipe; default: the defaults)")
 
 
 def add_config_option(parser: argparse.ArgumentParser) -> None:
@@ -139,8 +147,11 @@ def add_log_option(parser: argparse.ArgumentParser) -> None:
 
 
 def config_from_args(args):
-    """The config of ``--config`` (all defaults without it); raises ConfigError naming the key."""
-    return load_config(getattr(args, "config", None))
+    """The config of ``--config`` (all defaults without it) running the recipe of ``--recipe``
+    where the command has one; raises ConfigError naming the key."""
+    config = load_config(getattr(args, "config", None))
+    recipe = getattr(args, "recipe", None)
+    return config if recipe is None else with_recipe(config, load_recipe(recipe))
 
 
 @contextlib.contextmanager

@@ -20,6 +20,7 @@ from pathlib import Path
 from controller.commands.common import (
     add_config_option,
     add_part_option,
+    add_recipe_option,
     add_timing_option,
     positive_int,
     run_config_from_args,
@@ -132,6 +133,7 @@ def run(args) -> int:
 def add_arguments(parser: argparse.ArgumentParser) -> None:
     """The options of ``finepos demo``."""
     add_config_option(parser)
+    add_recipe_option(parser)
     add_part_option(parser, "the scene's, scene.object.kind")
     parser.add_argument("--out", default="out/demo", help="output folder")
     parser.add_argument("--trials", type=positive_int, default=50, help="placements per lighting")

@@ -74,6 +74,7 @@ from controller.commands.common import (
     ALL_PARTS,
     add_config_option,
     add_live_option,
+    add_recipe_option,
     add_system_option,
     add_timing_option,
     part_name_or_all,
@@ -208,6 +209,7 @@ def _evaluate_mounts(args, config) -> int:
 def add_arguments(parser: argparse.ArgumentParser) -> None:
     """The options of ``finepos evaluate``."""
     add_config_option(parser)
+    add_recipe_option(parser)
     add_system_option(parser)
     parser.add_argument("--part", metavar="NAME", type=part_name_or_all,
                         help=f"the part: {' | '.join(parts.PARTS)} (default: the scene's), or "

@@ -19,6 +19,7 @@ import sys
 
 from controller.commands.common import (
     add_config_file_option,
+    add_recipe_option,
     config_from_args,
     positive_int,
 )
@@ -47,6 +48,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.epilog = (f"Filter sets (the paper's: {PAPER_SET}):\n  "
                      + "\n  ".join(FILTER_SETS))
     add_config_file_option(parser)
+    add_recipe_option(parser)
     parser.add_argument("--out", required=True, metavar="DIR", help="output folder")
     parser.add_argument("--repeats", type=positive_int, default=10, help="repeats per filter set")
     parser.add_argument("--trials", type=positive_int, default=20,

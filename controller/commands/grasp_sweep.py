@@ -19,7 +19,11 @@ from pathlib import Path
 
 import numpy as np
 
-from controller.commands.common import add_config_file_option, config_from_args
+from controller.commands.common import (
+    add_config_file_option,
+    add_recipe_option,
+    config_from_args,
+)
 from controller.devices import open_devices
 from controller.loop.grasp import guarded_grasp
 from drivers.core.errors import ConfigError
@@ -175,6 +179,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     """The options of ``finepos grasp-sweep``."""
     parser.epilog = f"Seated: turned and tilted at most {SEAT_PHI_DEG:g} deg in the jaws."
     add_config_file_option(parser)
+    add_recipe_option(parser)
     parser.add_argument("--json", metavar="OUT", required=True, help="write the JSON report here")
     parser.add_argument("--out", metavar="DIR", help="write the PNG map grasp_sweep.png here")
     parser.add_argument("--max-mm", type=float, default=6.0, help="largest offset (mm; default 6)")

@@ -19,6 +19,7 @@ import sys
 from controller.commands.common import (
     add_config_file_option,
     add_part_option,
+    add_recipe_option,
     add_timing_option,
     positive_int,
     run_config_from_args,
@@ -43,6 +44,7 @@ def run(args) -> int:
 def add_arguments(parser: argparse.ArgumentParser) -> None:
     """The options of ``finepos table1``."""
     add_config_file_option(parser)
+    add_recipe_option(parser)
     add_part_option(parser, "the scene's, scene.object.kind")
     parser.add_argument("--out", required=True, metavar="DIR", help="output folder")
     parser.add_argument("--trials", type=positive_int, default=100,

@@ -31,6 +31,7 @@ from controller.commands.common import (
 from controller.commands.device_options import add_device_options, apply_device_options
 from controller.devices import open_devices
 from controller.fine_positioner import DATASETS, REZERO_FRAMES, REZERO_SYSTEMS, FinePositioner
+from controller.recipe import load_recipe
 from controller.teach.spacenav import DEFAULT_SIM_START_OFFSET, TeachAborted, teach_with_spacenav
 from controller.teach.state_lock import locked_state_folder
 from drivers.core.errors import ConfigError
@@ -101,11 +102,13 @@ def cmd_acquire(args) -> int:
 
 def cmd_train(args) -> int:
     """Train ``--system`` from the nn1 and nn2 datasets and print the model file."""
+    recipe = load_recipe(args.recipe) if args.recipe is not None else None
     with _locked_setup(args, "train", devices=False) as (config, state_dir):
         fp = FinePositioner(None, config, state_dir=state_dir)
-        model = fp.train(args.system)
+        model = fp.train(args.system, recipe)
     write_json(None, {"part": config.controller.part, "system": args.system,
                       "model": str(fp.model_path(args.system)),
+                      "recipe": args.recipe or "kept",
                       "train_images": model.train_images,
                       "train_seconds": round(model.train_seconds, 3)})
     return 0
@@ -230,11 +233,19 @@ def register(subparsers) -> None:
     p = add_command(
         subparsers, "train",
         help="train NN1 and NN2 into a model bundle",
-        description="Example: finepos train\n\nTrain the system from the nn1 and nn2 "
-                    "datasets into the part's state folder (state/<part>/model-<system>...).")
+        description="Example: finepos train --recipe recipe.yaml\n\nTrain the system from "
+                    "the nn1 and nn2 datasets into the part's state folder "
+                    "(state/<part>/model-<system>...). The model file keeps the recipe it was "
+                    "trained with (the perception settings and the loop's tuned keys, "
+                    "docs/configuration.md#recipe), and runs with it.")
     add_config_option(p)
     add_part_option(p, TAUGHT_PART_HELP)
     add_system_option(p)
+    p.add_argument("--recipe", metavar="FILE",
+                   help="train with this recipe (YAML: perception and loop sections; keys "
+                        "left out take their defaults; an empty file: all defaults). "
+                        "Without it: the recipe of the current model file, the defaults where "
+                        "there is none")
     p.set_defaults(func=cmd_train)
 
     p = add_command(
@@ -256,7 +267,7 @@ def register(subparsers) -> None:
                     "bring the camera's exposure down "
                     "(docs/decisions/0013-expose-for-the-part.md); "
                     "where single frames scatter more than the settling look's "
-                    "controller.loop.settle_max_frames can average within its bounds, "
+                    "recipe's loop.settle_max_frames can average within its bounds, "
                     "another says to lower its gain.\n\n"
                     "Also: finepos rezero --heading-step 5\n\n"
                     "--heading-step DEG: then also read the zero by heading (gabor): a lamp "
@@ -281,7 +292,7 @@ def register(subparsers) -> None:
     p.add_argument("--frames", type=int, default=REZERO_FRAMES,
                    help=f"frames at the taught pose (default {REZERO_FRAMES}; more where the "
                         "settling look's bounds ask for more frames a mean: two whole means "
-                        "at least, see controller.loop.settle_sem_mm)")
+                        "at least, see the recipe's loop.settle_sem_mm)")
     p.add_argument("--system", default="gabor", choices=REZERO_SYSTEMS,
                    help="the model to re-zero: gabor (the default) or align (the "
                         "image-alignment servo)")

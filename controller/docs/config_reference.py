@@ -2,9 +2,13 @@
 
 Example: finepos docs config --out docs/configuration.md
 
-Every key of ``controller.config.FineposConfig`` with its full dotted path, type, unit, range,
-default and description. A key's description is its field's ``metadata["doc"]`` where given,
-else its entry in the class docstring, where keys are described as ``name: text`` (several
+Every key with its full dotted path, type, unit, range, default and description, in four
+tiers: the cell config's operator keys (``OPERATOR_KEYS``), its advanced keys (the rest of the
+cell config: driver protocol, service limits, acquisition grids), the recipe
+(``controller.recipe``: ``perception`` and the loop's tuned keys, kept in the model file) and
+the simulator (``scene``, ``timing`` and the simulated devices' options). A key's
+description is its field's ``metadata["doc"]`` where given, else its entry in the class
+docstring, where keys are described as ``name: text`` (several
 names sharing a text as ``a / b:`` or ``a, b:``), entries separated by ``;`` or a sentence
 end. The unit comes from the name's suffix (``_mm``, ``_deg``, ``_s``...). The device sections
 (``arm``, ``camera``, ``wrench``) list each backend's options under its ``type``.
@@ -29,6 +33,8 @@ from typing import Any, Literal, Union
 
 from controller.config import FineposConfig
 from controller.devices import REGISTRIES
+from controller.loop.positioning import LoopConfig
+from controller.recipe import RECIPE_LOOP_KEYS, PerceptionConfig
 from drivers.core.files import atomic_write_text
 from sim_backend.cell.scene_config import SceneConfig
 
@@ -41,6 +47,37 @@ UNITS = (
     ("_n", "N"), ("_e", "electrons"), ("_baud", "baud"), ("_bytes", "bytes"),
 )
 
+# The keys an operator sets on a cell; the other keys of the cell config keep their defaults
+# on most cells (docs/configuration.md lists them as advanced).
+OPERATOR_KEYS = (
+    "arm.type", "arm.port", "arm.baudrate", "arm.line_ending", "arm.gripper_open_width_mm",
+    "arm.gripper_closed_width_mm",
+    "camera.type", "camera.source",
+    "wrench.type", "wrench.port", "wrench.baud", "wrench.counts_per_force",
+    "wrench.counts_per_torque",
+    "safety.workspace_min_mm", "safety.workspace_max_mm", "safety.max_step_mm",
+    "safety.max_step_deg", "safety.on_violation",
+    "controller.part", "controller.paths.state_dir", "controller.paths.log_dir",
+    "controller.loop.converge_mm", "controller.loop.converge_deg", "controller.loop.max_loops",
+    "controller.loop.save_images",
+    "controller.grasp.free_descent_mm", "controller.grasp.step_mm", "controller.grasp.check",
+    "controller.grasp.lift_mm", "controller.grasp.min_held_weight_n",
+    "controller.grasp.max_closing_force_n", "controller.grasp.guards",
+    "controller.grasp.guards[].quantity", "controller.grasp.guards[].op",
+    "controller.grasp.guards[].limit", "controller.grasp.guards[].action",
+    "controller.teach.socket_path", "controller.teach.record_button",
+    "controller.teach.abort_button", "controller.teach.jog.max_speed_mm_s",
+    "controller.teach.jog.max_speed_deg_s",
+    "service.socket_path", "service.socket_group", "service.allowed_users",
+    "service.allowed_groups", "service.tcp", "service.tcp.port", "service.tcp.token_file",
+    "service.tcp.host", "service.record_dir", "service.live", "service.live.port",
+    "service.live.address", "service.metrics_port",
+    "service.metrics_address", "service.self_check_at_start",
+)
+CELL_SECTIONS = ("arm", "camera", "wrench", "safety", "controller", "service")
+SIMULATOR_SECTIONS = ("scene", "timing")
+TIERS = ("operator", "advanced", "recipe", "simulator")
+
 # Where each root section is documented further, and what it is for.
 SECTION_NOTES = {
     "arm": "The arm: `type` picks the backend, the other keys are that backend's options.",
@@ -50,8 +87,6 @@ SECTION_NOTES = {
     "scene": "The simulated cell only: read where a simulated device or an emulator is built "
              "([simulator.md](simulator.md)).",
     "safety": "Limits every motion command must respect, applied in one place.",
-    "perception": "The vision pipeline and the systems it is compared with "
-                  "([method.md](method.md)).",
     "controller": "The part, the positioning loop, the grasp, acquisition, teach-in and paths.",
     "service": "`finepos serve` ([service.md](service.md)).",
     "timing": "How long every action of the cell takes: the simulated cell and the emulators "
@@ -254,35 +289,116 @@ def section_keys(section: str) -> Iterator[Key]:
 
 
 def sections() -> list[str]:
-    """The root sections in file order."""
-    return [f.name for f in dataclasses.fields(FineposConfig) if f.name != "source"]
+    """The cell config's root sections in file order (the recipe is not one of them)."""
+    return [f.name for f in dataclasses.fields(FineposConfig)
+            if f.name not in ("source", "perception")]
+
+
+def tier_of(key: Key) -> str:
+    """Which tier a key of the cell config's sections is in: ``operator``, ``advanced``,
+    ``recipe`` (a recipe key of ``controller.loop``) or ``simulator``."""
+    section = key.path.split(".")[0]
+    if section in SIMULATOR_SECTIONS or key.backend == "sim":
+        return "simulator"
+    if key.path.startswith("controller.loop.") and \
+            key.path.removeprefix("controller.loop.") in RECIPE_LOOP_KEYS:
+        return "recipe"
+    return "operator" if key.path in OPERATOR_KEYS else "advanced"
+
+
+def recipe_keys() -> Iterator[Key]:
+    """The recipe's keys, as a recipe file names them."""
+    yield from keys(PerceptionConfig, "perception")
+    yield from (key for key in keys(LoopConfig, "loop")
+                if key.path.removeprefix("loop.") in RECIPE_LOOP_KEYS)
+
+
+def tiered() -> dict[str, dict[str, list[Key]]]:
+    """Every key by tier, then by root section, in file order."""
+    out: dict[str, dict[str, list[Key]]] = {tier: {} for tier in TIERS}
+    for section in sections():
+        for key in section_keys(section):
+            tier = tier_of(key)
+            if tier != "recipe":
+                out[tier].setdefault(section, []).append(key)
+    for key in recipe_keys():
+        out["recipe"].setdefault(key.path.split(".")[0], []).append(key)
+    return out
+
+
+def operator_keys() -> list[str]:
+    """The operator keys the page documents."""
+    return [key.path for keys_ in tiered()["operator"].values() for key in keys_]
+
+
+RECIPE_NOTES = {
+    "perception": "The vision pipeline and the systems it is compared with "
+                  "([method.md](method.md)).",
+    "loop": "The positioning loop's tuned keys (its convergence thresholds and budget are the "
+            "cell's, under `controller.loop`).",
+}
+
+TIER_TEXT = {
+    "operator": ["## Operator keys", "",
+                 "What an operator sets on a cell: the devices and their ports, the safety "
+                 "limits, the part, the paths, the loop's precision and budget, the grasp's "
+                 "guards and checks, teach-in and the service."],
+    "advanced": ["## Advanced keys", "",
+                 "The rest of the cell config. Most cells keep these defaults: the drivers' "
+                 "protocol details and templates (for a controller that speaks differently), "
+                 "the service's limits, the acquisition grids, the grasp's sampling and the "
+                 "3D mouse's axes."],
+    "recipe": ["## Recipe", "",
+               "The perception and loop settings tuned by experiment. They are not in the cell "
+               "config (a cell config that sets one is refused, naming its home): "
+               "`finepos train --recipe FILE` trains with a recipe file (YAML, sections "
+               "`perception` and `loop`, every key optional, `deploy/recipe.yaml` is a "
+               "commented example) and writes the recipe into the model file; every run reads "
+               "it back from there. `finepos train` without `--recipe` keeps the model file's "
+               "recipe; a model file without one runs with these defaults. The lab commands "
+               "(`evaluate`, `table1`, `demo`, ...) take `--recipe` too."],
+    "simulator": ["## Simulator", "",
+                  "Read only where a simulated cell or an emulator is built "
+                  "([simulator.md](simulator.md)): the scene, the timing model, and the options "
+                  "of the simulated devices (`type: sim`)."],
+}
 
 
 def render() -> str:
     """The whole page (Markdown)."""
+    tiers = tiered()
     lines = [
         "# Configuration reference",
         "",
         f"<!-- Generated by `{COMMAND}` from the typed config; do not edit. -->",
         "",
-        "One YAML file, given with `--config FILE` (the service: `/etc/finepos/finepos.yaml`).",
+        "finepos reads its settings from three places:",
+        "",
+        f"- **The cell config**, one YAML file given with `--config FILE` (the service: "
+        f"`/etc/finepos/finepos.yaml`; `deploy/finepos.yaml` is a commented example): its "
+        f"[{len(operator_keys())} operator keys](#operator-keys) and its "
+        f"[advanced keys](#advanced-keys).",
+        "- **The recipe**, kept in the model file: the perception and loop settings tuned by "
+        "experiment ([recipe](#recipe)).",
+        "- **The simulator's sections** of the cell config ([simulator](#simulator)).",
+        "",
         "Every key is optional unless its default says `required`; with no file every default",
         "applies (the simulated cell, good light, the cube). Unknown keys, wrong types and",
         "out-of-range values fail at load with the key's full path, e.g.",
-        "`scene.lighting.preset: must be one of good | poor | dim | side`.",
-        "`deploy/finepos.yaml` is a commented example of every section. A key under `[]` is a",
+        "`scene.lighting.preset: must be one of good | poor | dim | side`. A key under `[]` is a",
         "key of each entry of a list.",
-        "",
-        "Sections: " + ", ".join(f"[`{s}`](#{s})" for s in sections()) + ".",
     ]
-    for section in sections():
-        lines += ["", f"## {section}", "", SECTION_NOTES.get(section, ""), "",
-                  "| key | type | unit | range | default | description |",
-                  "|---|---|---|---|---|---|"]
-        for key in section_keys(section):
-            doc = f"(`type: {key.backend}`) {key.doc}".rstrip() if key.backend else key.doc
-            lines.append(f"| `{key.path}` | {key.type} | {key.unit} | {key.range} | "
-                         f"{_cell(key.default)} | {doc} |")
+    for tier in TIERS:
+        lines += ["", *TIER_TEXT[tier]]
+        for section, section_keys_ in tiers[tier].items():
+            note = (RECIPE_NOTES if tier == "recipe" else SECTION_NOTES).get(section, "")
+            lines += ["", f"### {section}", ""] + ([note, ""] if note else []) + [
+                "| key | type | unit | range | default | description |",
+                "|---|---|---|---|---|---|"]
+            for key in section_keys_:
+                doc = f"(`type: {key.backend}`) {key.doc}".rstrip() if key.backend else key.doc
+                lines.append(f"| `{key.path}` | {key.type} | {key.unit} | {key.range} | "
+                             f"{_cell(key.default)} | {doc} |")
     return "\n".join(lines) + "\n"
 
 
@@ -292,7 +408,8 @@ def _cell(text: str) -> str:
 
 def undocumented() -> list[str]:
     """The keys without a description (the test keeps this list from growing)."""
-    return [key.path for section in sections() for key in section_keys(section) if not key.doc]
+    return [key.path for by_section in tiered().values() for section_keys_ in by_section.values()
+            for key in section_keys_ if not key.doc]
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:

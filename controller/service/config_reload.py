@@ -1,7 +1,8 @@
 """What a config reload (SIGHUP) may change while the service runs, and what needs a restart.
 
-Live: ``safety`` (the arm's limits), ``perception``, ``controller`` (except the log folder, whose
-file is open, and the state folder, whose lock is held), and in ``service`` the allowed peers,
+Live: ``safety`` (the arm's limits), ``controller`` (except the log folder, whose file is open,
+and the state folder, whose lock is held; the recipe comes with the models, which a reload
+reads again), and in ``service`` the allowed peers,
 the idle poll, the reconnection backoff and the stall and stop timeouts. Everything else is
 fixed by what is open: the devices (``arm``, ``camera``, ``wrench``, and ``scene`` for the
 simulated cell), the log and state folders and the listeners (the control socket, the TCP

@@ -4,7 +4,7 @@ Not the paper's: the comparison a cell owner would make against an OpenCV-built 
 one pass over the frame yields the whole step, so the rotation step only reads the percept.
 
 The vision lives in ``calibration_free.baselines.align``; settings come from the
-``perception.align`` config section.
+``perception.align`` recipe section.
 """
 
 from __future__ import annotations

@@ -3,7 +3,7 @@ the expected Hough-peak constellation give the rotation; a 3x3x3 PSOM completes 
 the translation. It reports ``no_object`` when the peaks do not validate.
 
 The vision lives in ``calibration_free.baselines.hough``; settings come from the
-``perception.hough`` config section.
+``perception.hough`` recipe section.
 """
 
 from __future__ import annotations

@@ -2,7 +2,7 @@
 of the ROI and a B-spline neuro-fuzzy controller for the rotation.
 
 The vision lives in ``calibration_free.baselines.pca``; settings come from the
-``perception.pca`` config section.
+``perception.pca`` recipe section.
 """
 
 from __future__ import annotations

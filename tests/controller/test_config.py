@@ -2,8 +2,15 @@
 
 import pytest
 
-from controller.config import config_from_mapping, load_config, with_part
+from controller.config import (
+    config_from_mapping,
+    load_config,
+    recipe_of,
+    with_part,
+    with_recipe,
+)
 from controller.devices import with_device
+from controller.recipe import Recipe, recipe_from_mapping
 from controller.simulated import UnreadScene
 from drivers.core.errors import ConfigError
 
@@ -31,18 +38,61 @@ def test_backend_options_are_checked_by_type():
     ({"arm": {"type": "sim", "repeatability_mm": -1}}, "arm.repeatability_mm: must be >= 0"),
     ({"arm": {"type": "val", "baudrate": 9600}}, "arm"),
     ({"scene": {"lighting": {"preset": "disco"}}}, "scene.lighting.preset: must be one of"),
-    ({"controller": {"loop": {"r_fine_mm": "four"}}},
-     "controller.loop.r_fine_mm: expected a number"),
+    ({"controller": {"loop": {"max_loops": "four"}}},
+     "controller.loop.max_loops: expected a number"),
     ({"controller": {"grasp": {"guards": [{"quantity": "fz_n", "op": "=", "limit": 1,
                                            "action": "stop"}]}}},
      "controller.grasp.guards[0].op: must be one of"),
     ({"safety": {"on_violation": "ignore"}}, "safety.on_violation: must be one of reject | clip"),
-    ({"perception": {"gabor": {"lambda_px": 0}}}, "perception.gabor.lambda_px: must be > 0"),
 ])
 def test_bad_configs_name_the_key(data, message):
     with pytest.raises(ConfigError) as info:
         config_from_mapping(data)
     assert message in str(info.value)
+
+
+@pytest.mark.parametrize("data,message", [
+    ({"perception": {"gabor": {"lambda_px": 0}}}, "perception.gabor.lambda_px: must be > 0"),
+    ({"loop": {"r_fine_mm": "four"}}, "loop.r_fine_mm: expected a number"),
+    ({"loop": {"max_loops": 3}}, "loop.max_loops: a cell key, not a recipe key: set "
+                                 "controller.loop.max_loops in the cell config"),
+    ({"controller": {}}, "controller: unknown recipe section (allowed: perception, loop"),
+    ({"loop": {"settle_frames": 4, "settle_max_frames": 2}}, "settle_max_frames: 2 is below"),
+])
+def test_bad_recipes_name_the_key(data, message):
+    with pytest.raises(ConfigError) as info:
+        recipe_from_mapping(data, "recipe.yaml")
+    assert str(info.value).startswith("recipe.yaml: ") and message in str(info.value)
+
+
+@pytest.mark.parametrize("data,message", [
+    ({"perception": {"gabor": {"sigma_px": 10}}},
+     "perception.gabor: a recipe key, kept in the model file: set it in a recipe file given "
+     "to `finepos train --recipe FILE` (as perception.gabor)"),
+    ({"perception": None}, "perception: a recipe key"),
+    ({"controller": {"loop": {"max_loops": 3, "settle_frames": 5}}},
+     "controller.loop.settle_frames: a recipe key, kept in the model file: set it in a recipe "
+     "file given to `finepos train --recipe FILE` (as loop.settle_frames)"),
+])
+def test_a_cell_config_that_sets_a_recipe_key_names_its_home(data, message):
+    with pytest.raises(ConfigError) as info:
+        config_from_mapping(data)
+    assert str(info.value) == message or str(info.value).startswith(message)
+    assert "\n" not in str(info.value)
+
+
+def test_a_recipe_runs_its_perception_and_loop_keys_and_keeps_the_cells():
+    cell = config_from_mapping({"controller": {"loop": {"max_loops": 3.5}}})
+    recipe = recipe_from_mapping({"perception": {"edge_coverage": "grey"},
+                                  "loop": {"settle_frames": 5}})
+    run = with_recipe(cell, recipe)
+    assert run.perception.edge_coverage == "grey" and run.controller.loop.settle_frames == 5
+    assert run.controller.loop.max_loops == 3.5  # the cell's key
+    assert recipe_of(run) == Recipe(recipe.perception, run.controller.loop)
+    stored = recipe_of(run).to_mapping()
+    assert "max_loops" not in stored["loop"] and stored["loop"]["settle_frames"] == 5
+    assert recipe_from_mapping(stored) == recipe_from_mapping(
+        {"perception": {"edge_coverage": "grey"}, "loop": {"settle_frames": 5}})
 
 
 def test_file_errors_name_the_file(tmp_path):

@@ -13,6 +13,8 @@ from controller.devices import open_devices
 from controller.evaluation.metrics import is_safe
 from controller.fine_positioner import REZERO_FRAMES, FinePositioner
 from controller.loop.iteration_log import IterationLog, read_log
+from controller.loop.positioning import LoopConfig
+from controller.recipe import Recipe, with_recipe_stored
 from drivers.core.pose import ToolStep, wrap_deg
 
 pytestmark = pytest.mark.slow
@@ -60,10 +62,12 @@ def test_no_object_looks_from_the_other_side_then_stops_without_a_step(trained):
             (before.x_mm, before.y_mm, before.z_mm), abs=0.05)
         assert abs(wrap_deg(after.t_deg - before.t_deg, 360.0)) == pytest.approx(180.0, abs=0.05)
         fp.move_to(fp.state().nominal_pose)
-        off = dataclasses.replace(cfg, controller=dataclasses.replace(
-            cfg.controller, loop=dataclasses.replace(cfg.controller.loop, look_around_deg=None)))
+        off = FinePositioner(devices, cfg, state_dir=trained)
+        model = off.load_model()  # its recipe without the look-around
+        off.use_model(dataclasses.replace(model, model=with_recipe_stored(
+            model.model, Recipe(loop=LoopConfig(look_around_deg=None)))))
         before = devices.arm.pose()
-        result = FinePositioner(devices, off, state_dir=trained).position()
+        result = off.position()
         assert result.outcome == "no_object" and result.loops == 0
         assert devices.arm.pose() == before
 
@@ -148,27 +152,28 @@ def test_cli_rezero_moves_the_zero_to_the_new_light_and_refuses_a_moved_part(tra
     shutil.copytree(trained, state)
     grey = "perception:\n  edge_coverage: grey\n"
     (tmp_path / "grey.yaml").write_text(grey)
-    assert main(["train", "--state-dir", str(state), "--config",
-                 str(tmp_path / "grey.yaml")]) == 0
-    capsys.readouterr()
-    poor = tmp_path / "poor.yaml"
-    poor.write_text(grey + "scene:\n  lighting:\n    preset: poor\n")
     # without bounds on the settling look's noise: means of its three frames
     fixed = tmp_path / "fixed.yaml"
-    fixed.write_text(poor.read_text() + "controller:\n  loop:\n    settle_sem_mm: null\n"
-                     "    settle_sem_deg: null\n")
+    fixed.write_text(grey + "loop:\n  settle_sem_mm: null\n  settle_sem_deg: null\n")
+    assert main(["train", "--state-dir", str(state), "--recipe", str(fixed)]) == 0
+    capsys.readouterr()
+    poor = tmp_path / "poor.yaml"
+    poor.write_text("scene:\n  lighting:\n    preset: poor\n")
     model = state / "model-gabor.fpm"
-    assert main(["rezero", "--state-dir", str(state), "--config", str(fixed)]) == 0
+    assert main(["rezero", "--state-dir", str(state), "--config", str(poor)]) == 0
     out = json.loads(capsys.readouterr().out)
     assert out["part"] == "cube" and out["model"] == str(model)
     assert out["frames_used"] == REZERO_FRAMES and out["average"] == 3
     assert max(out["frame_scatter"][:2]) > 0.02, out  # the dim frame's noise
     assert 0.1 < math.hypot(*out["shift_mm"]["nn1"]) < 1.0, out
-    assert main(["rezero", "--state-dir", str(state), "--config", str(fixed)]) == 0
+    assert main(["rezero", "--state-dir", str(state), "--config", str(poor)]) == 0
     again = json.loads(capsys.readouterr().out)
     assert math.hypot(*again["shift_mm"]["nn1"]) < 0.05, again  # it reads zero there now
     # with the default bounds on the settling look's noise the zero is read on means of as
     # many frames as that look reads in this light, two of them at least
+    assert main(["train", "--state-dir", str(state), "--recipe",
+                 str(tmp_path / "grey.yaml")]) == 0
+    capsys.readouterr()
     assert main(["rezero", "--state-dir", str(state), "--config", str(poor)]) == 0
     out = json.loads(capsys.readouterr().out)
     assert 3 < out["average"] <= 16, out
@@ -177,7 +182,7 @@ def test_cli_rezero_moves_the_zero_to_the_new_light_and_refuses_a_moved_part(tra
         out
     written = model.read_bytes()
     moved = tmp_path / "moved.yaml"
-    moved.write_text(grey + "scene:\n  lighting:\n    preset: poor\n  object:\n"
+    moved.write_text("scene:\n  lighting:\n    preset: poor\n  object:\n"
                      "    x_mm: 304.0\n")
     assert main(["rezero", "--state-dir", str(state), "--config", str(moved)]) != 0
     err = capsys.readouterr().err.strip().splitlines()

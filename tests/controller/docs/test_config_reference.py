@@ -19,10 +19,30 @@ def test_committed_page_matches_the_code():
 def test_every_section_and_key_path_is_on_the_page():
     page = config_reference.render()
     for section in config_reference.sections():
-        assert f"\n## {section}\n" in page
-    for path in ("arm.port", "controller.loop.r_fine_mm", "controller.grasp.guards[].limit",
+        assert f"\n### {section}\n" in page
+    for path in ("arm.port", "loop.r_fine_mm", "controller.grasp.guards[].limit",
                  "service.tcp.port", "timing.arm.t0_s", "scene.camera.lens.k1"):
         assert f"| `{path}` |" in page, path
+
+
+def test_operator_keys_are_at_most_sixty_and_all_exist():
+    listed = config_reference.operator_keys()
+    assert len(listed) <= 60
+    assert sorted(listed) == sorted(config_reference.OPERATOR_KEYS)  # none names a lost key
+
+
+def test_the_tiers_hold_every_key_once():
+    cell = [key.path + key.backend for section in config_reference.sections()
+            for key in config_reference.section_keys(section)
+            if config_reference.tier_of(key) != "recipe"]
+    recipe = [key.path for key in config_reference.recipe_keys()]
+    tiered = [key.path + key.backend for by_section in config_reference.tiered().values()
+              for keys in by_section.values() for key in keys]
+    assert sorted(tiered) == sorted(cell + recipe) and len(set(tiered)) == len(tiered)
+    assert "loop.settle_frames" in recipe and "loop.max_loops" not in recipe
+    page = config_reference.render()
+    assert "| `controller.loop.settle_frames` |" not in page
+    assert "| `controller.loop.max_loops` |" in page
 
 
 def test_docstring_entries_are_parsed_per_key():

@@ -12,9 +12,12 @@ from pathlib import Path
 import numpy as np
 import pytest
 
+from calibration_free.bundle import ModelBundle
 from calibration_free.synthetic import SyntheticCell, render
 from controller.devices import open_devices
 from controller.loop.iteration_log import read_log
+from controller.loop.positioning import LoopConfig
+from controller.recipe import Recipe, with_recipe_stored
 from controller.service.client import ServiceError
 from controller.service.sd_notify import Notifier
 from drivers.camera.mjpeg_server import MjpegServer
@@ -230,8 +233,10 @@ def test_camera_stall_mid_positioning_keeps_every_logged_record(tmp_path, short_
     """The fake camera shows the synthetic cube where the fake arm's pose puts it, and stops
     delivering after a few frames: the records written before are all in the log, whole."""
     config = service_config(tmp_path, short_dir, controller={"loop": {
-        "converge_mm": 0.0, "converge_deg": 0.0, "settle_frames": 1}})  # a frame a look
-    copy_state(cube_model_files, config)
+        "converge_mm": 0.0, "converge_deg": 0.0}})
+    model = copy_state(cube_model_files, config) / "model-gabor.fpm"
+    bundle = ModelBundle.load(model)  # a frame a look: the model's recipe
+    with_recipe_stored(bundle, Recipe(loop=LoopConfig(settle_frames=1))).save(model)
     arm = FakeArm(start=NOMINAL.moved_in_tool_frame(ToolStep(-8.0, 6.0, 0.0, -12.0)))
     scene, frames = SyntheticCell(), []
 

@@ -10,7 +10,7 @@ import pytest
 
 from calibration_free.errors import BundleError
 from calibration_free.synthetic import render
-from controller.config import PerceptionConfig
+from controller.recipe import PerceptionConfig
 from controller.systems.estimator import RotationEstimate, TranslationEstimate
 from controller.systems.registry import SYSTEMS
 from controller.teach.cell_state import CellState

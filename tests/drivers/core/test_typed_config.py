@@ -113,13 +113,16 @@ def test_sizes_have_upper_limits_that_fit_the_machine():
     import pytest as _pytest
 
     from controller.config import config_from_mapping
+    from controller.recipe import recipe_from_mapping
     from drivers.core.errors import ConfigError
 
     for data, key in (({"perception": {"nn2_hidden": [100000000]}}, "perception.nn2_hidden"),
                       ({"perception": {"nn2_hidden": [8] * 9}}, "nn2_hidden"),
                       ({"perception": {"gabor": {"roi_px": 100000000}}},
-                       "perception.gabor.roi_px"),
-                      ({"service": {"stop_timeout_s": 1e308}}, "service.stop_timeout_s"),
+                       "perception.gabor.roi_px")):
+        with _pytest.raises(ConfigError, match=key.replace(".", r"\.")):
+            recipe_from_mapping(data)
+    for data, key in (({"service": {"stop_timeout_s": 1e308}}, "service.stop_timeout_s"),
                       ({"service": {"abort_wait_s": float("inf")}}, "service.abort_wait_s")):
         with _pytest.raises(ConfigError, match=key.replace(".", r"\.")):
             config_from_mapping(data)
