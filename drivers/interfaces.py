@@ -211,10 +211,12 @@ class Arm(Device):
         contact input by itself (VAL with ``arm.programs``, the simulated arm)."""
         return False
 
-    def guarded_descent(self, via: Pose, target: Pose, guard_speed_percent: float) -> Descent:
-        """Open the jaws as the arm starts, move to ``via`` at the set speed and on to
-        ``target`` at ``guard_speed_percent`` of it, stopping at once when the contact input
-        (the wrist sensor's monitor output) trips, in one controller command.
+    def guarded_descent(self, via: Pose, target: Pose, guard_speed_percent: float,
+                        guard_mm: float) -> Descent:
+        """Open the jaws as the arm starts, move to ``via`` at the set speed, on along the
+        approach axis for ``guard_mm`` at ``guard_speed_percent`` of it, and the rest of the
+        way to ``target`` at the set speed again, stopping at once wherever the contact input
+        (the wrist sensor's monitor output) trips: one controller command.
 
         Both poses pass the safety layer first (rejected, nothing moves, when either is beyond
         it). Raises MotionRejectedError when the input is already high (nothing moves), or
@@ -226,6 +228,8 @@ class Arm(Device):
         if not 0.0 < guard_speed_percent <= 100.0:
             raise MotionRejectedError(f"guard speed must be in (0, 100] percent, got "
                                       f"{guard_speed_percent!r}")
+        if not guard_mm >= 0.0:
+            raise MotionRejectedError(f"guard length must be >= 0 mm, got {guard_mm!r}")
         current = self._start_pose()
         if self.limits:
             for pose in (via, target):
@@ -235,20 +239,30 @@ class Arm(Device):
                                               f"{pose}")
         self._reached, self._move_start = None, current
         try:
-            descent = self._guarded_descent(via, target, guard_speed_percent)
+            descent = self._guarded_descent(via, target, guard_speed_percent, guard_mm)
         finally:
             self._move_start = None
         self._reached = descent.pose
         self._jaws_open = True
         return descent
 
+    @staticmethod
+    def guard_end(via: Pose, target: Pose, guard_mm: float) -> tuple[Pose, float]:
+        """Where a guarded descent's slow part ends, ``guard_mm`` past ``via`` towards
+        ``target`` along the approach axis (not past ``target``), and how far before
+        ``target`` that is (mm)."""
+        rest_mm = max(0.0, via.tool_step_to(target).dz_mm - guard_mm)
+        return target.moved_in_tool_frame(ToolStep(dz_mm=-rest_mm)), rest_mm
+
     def move_until(self, target: Pose, stop: Callable[[], bool], speed_factor: float = 1.0,
-                   setup: bool = True) -> tuple[Pose, bool]:
+                   setup: bool = True, settle: bool = True) -> tuple[Pose, bool]:
         """Absolute move to ``target`` that ends at once where ``stop()`` turns true (what a
         controller program's motion does under a reaction); returns the pose reached and
         whether ``stop`` ended it. ``speed_factor``: the program's speed on top of the set
         speed; ``setup``: the move pays the controller's set-up (the first motion of a program
-        run; later ones do not). This default checks ``stop`` every
+        run; later ones do not); ``settle``: it pays the settling at its end (where the program
+        stops the arm: before a hand instruction, at its end; not where another motion
+        follows). A stop always settles. This default checks ``stop`` every
         ``MOVE_UNTIL_STEP_MM`` of a stepped move and ignores both timings; timed backends
         override it."""
         self._require_active()
@@ -263,7 +277,8 @@ class Arm(Device):
             self.move_to(start.moved_in_tool_frame(scaled) if i < count else target)
         return self.pose(fresh=False), stop()
 
-    def _guarded_descent(self, via: Pose, target: Pose, guard_speed_percent: float) -> Descent:
+    def _guarded_descent(self, via: Pose, target: Pose, guard_speed_percent: float,
+                         guard_mm: float) -> Descent:
         """Backends that run programs implement this (see ``guarded_descent``)."""
         raise MotionRejectedError(f"{type(self).__name__} runs no guarded descent")
 

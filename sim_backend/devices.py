@@ -64,6 +64,7 @@ _WATCH_STEP_MM = 0.25
 # prompt and the closing prompt (see ``drivers.val.config``).
 _SET_LINE_CHARS = 57
 _DESCENT_LINES = ("ex fpdesc",)
+_DESCENT_SEGMENTS = 3  # to fpa, the guarded part at the guard speed, the rest
 
 
 @dataclass
@@ -190,12 +191,13 @@ class SimArm(Arm):
             self.cell.open_gripper()
 
     def move_until(self, target: Pose, stop: Callable[[], bool], speed_factor: float = 1.0,
-                   setup: bool = True) -> tuple[Pose, bool]:
+                   setup: bool = True, settle: bool = True) -> tuple[Pose, bool]:
         """A program's motion (see ``Arm.move_until``): ``stop`` is looked at every
         ``_WATCH_STEP_MM`` of the path; when it turns true the arm goes on for the reaction
-        (``timing.arm.reaction_s`` and the sensor's ``ati_output_s``) and brakes, then
+        (``timing.arm.reaction_s`` and the sensor's ``ati_output_s``) and brakes at the full
+        ``joint_accel_deg_s2`` (a judgement: a reaction stop is not scaled by the speed), then
         settles. Timed: the set-up ``t0_s`` only with ``setup``, the profile at the set speed
-        times ``speed_factor``, the settling at the stop."""
+        times ``speed_factor``, the settling with ``settle`` or after a stop."""
         self._require_active()
         timing, cell = self.timing, self.cell
         begin = timing.take_command_start() if timing is not None else 0.0
@@ -222,13 +224,11 @@ class SimArm(Arm):
         if stop():
             stopped_at = 0.0
         else:
-            for i in range(1, count + 1):
-                fraction = i / count
-                wait_until(t0 + profile_elapsed(fraction) * profile_s)
+            for fraction in self._watch_points(count, begin + t0, profile_s, wall):
                 with contextlib.suppress(FineposError):  # a refused pose on the way: go on
-                    cell.move_arm(_interpolate(start, target, fraction) if i < count
+                    cell.move_arm(_interpolate(start, target, fraction) if fraction < 1.0
                                   else target)
-                if i < count and stop():
+                if fraction < 1.0 and stop():
                     stopped_at = fraction
                     break
         if stopped_at is None:
@@ -236,7 +236,8 @@ class SimArm(Arm):
         else:
             latency = timing.config.arm.reaction_s + timing.config.ati_output_s \
                 if timing is not None else 0.0
-            accel = arm.joint_accel_deg_s2 * speed / 100.0 if arm is not None else 0.0
+            # a reaction brakes at the arm's full deceleration, whatever the speed
+            accel = arm.joint_accel_deg_s2 if arm is not None else 0.0
             over, rest_s = stop_overtravel(stopped_at, distance, profile_s,
                                            float(np.max(np.abs(delta))), accel, latency)
             final = min(1.0, stopped_at + (over / distance if distance > 0 else 0.0))
@@ -245,7 +246,8 @@ class SimArm(Arm):
                     cell.move_arm(_interpolate(start, target, final))
             elapsed = t0 + profile_elapsed(stopped_at) * profile_s + rest_s
         if timing is not None:
-            elapsed += timing.config.arm.settle_s
+            if settle or stopped_at is not None:
+                elapsed += timing.config.arm.settle_s
             if wall:
                 timing.motion_s += elapsed
                 wait_until(elapsed)
@@ -254,10 +256,30 @@ class SimArm(Arm):
         self._reached = cell.arm_pose()
         return self._reached, stopped_at is not None
 
-    def _guarded_descent(self, via: Pose, target: Pose, guard_speed_percent: float) -> Descent:
+    def _watch_points(self, count: int, profile_begin: float, profile_s: float,
+                      wall: bool):
+        """The path fractions at which a watched motion looks at its condition: every
+        ``_WATCH_STEP_MM`` (``count`` in all) on the virtual clock; on a wall clock at the
+        same points in time, or, when the cell's own work (shared with the camera's renders)
+        runs late, where the profile is by then: the arm is never slowed down by it."""
+        if not wall or profile_s <= 0.0:
+            yield from (i / count for i in range(1, count + 1))
+            return
+        clock = self.timing.clock
+        last = 0.0
+        while last < 1.0:
+            nearest = profile_begin + profile_elapsed(min(1.0, last + 1.0 / count)) * profile_s
+            clock.advance(nearest - clock.now())
+            last = max(min(1.0, last + 1.0 / count),
+                       profile_fraction(clock.now() - profile_begin, profile_s))
+            yield last
+
+    def _guarded_descent(self, via: Pose, target: Pose, guard_speed_percent: float,
+                         guard_mm: float) -> Descent:
         """In process, as the VAL driver's program path: the target lines and ``ex fpdesc``
         on the VAL line, the jaws opening as the arm starts, the first motion with its
-        set-up, the guarded one at the guard speed without, each settling where it stops;
+        set-up, the guarded one at the guard speed and the rest without, settling where the
+        arm stops (at the target, or on contact);
         a stop on contact costs a ``where`` (the driver reads where the arm stopped)."""
         timing = self.timing
         wire = contact_wire(self.cell)
@@ -268,10 +290,14 @@ class SimArm(Arm):
         if wire.high():
             raise MotionRejectedError("the contact input is high before the descent")
         self.cell.open_gripper()
-        pose, contact = self.move_until(via, wire.high, 1.0, setup=True)
-        if not contact:
-            pose, contact = self.move_until(target, wire.high, guard_speed_percent / 100.0,
-                                            setup=False)
+        guard_end, _ = self.guard_end(via, target, guard_mm)
+        segments = ((via, 1.0), (guard_end, guard_speed_percent / 100.0), (target, 1.0))
+        contact = False
+        for i, (pose, factor) in enumerate(segments):
+            pose, contact = self.move_until(pose, wire.high, factor, setup=i == 0,
+                                            settle=i == len(segments) - 1)
+            if contact:
+                break
         if contact and timing is not None:
             timing.val_wire(cell_timing.where_bytes())
         return Descent(pose, contact)

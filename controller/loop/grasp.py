@@ -32,8 +32,9 @@ from typing import Literal
 import numpy as np
 
 from controller.loop.guards import Guard, first_tripped
+from drivers.core.errors import MotionRejectedError
 from drivers.core.pose import Pose, ToolStep
-from drivers.interfaces import Arm, WrenchSensor
+from drivers.interfaces import Arm, MonitorCondition, WrenchSensor
 
 GraspCheck = Literal["weight", "width", "both"]
 
@@ -64,9 +65,17 @@ class GraspConfig:
     the descent in which contact is expected (guards named "early contact" are ignored there);
     carry_final_step: where a grasp follows the positioning loop in the same run
     (``finepos position --grasp``, the service's ``position`` job with ``grasp``, the
-    evaluation), the converged look's step (``controller.loop.final_step``) is made by the
+    evaluation), the converged look's step (the recipe's ``loop.final_step``) is made by the
     first descent move instead of a move of its own (one VAL command and its motion fewer);
     false: the loop makes it;
+    guard_speed_percent / guard_clearance_mm / contact_axis: on an arm that runs programs
+    (``arm.programs``: the program path) the descent is one controller program: at the set speed to
+    ``free_descent_mm - guard_clearance_mm`` (1 mm above the part's top by default), at
+    ``guard_speed_percent`` of it to
+    ``free_descent_mm + guard_zone_mm`` (past the rim), the rest at the set speed, stopped
+    by the controller itself wherever the wrist sensor's monitor output trips: the sensor's
+    condition is ``contact_axis`` below minus the limit of the first
+    ``stop`` guard (a finger meeting something pushes against the approach direction);
     check: how the grip is verified (see the module docstring): ``weight`` (the wrist
     sensor; works on every gripper), ``width`` (the finger width, for grippers that measure
     it) or ``both``; width_tolerance_mm: finger width must be within this of the taught
@@ -84,6 +93,9 @@ class GraspConfig:
     guard_zone_mm: float = field(default=4.0, metadata={"min": 0.0, "max": 1000.0})
     contact_margin_mm: float = field(default=2.0, metadata={"min": 0.0})
     carry_final_step: bool = True
+    guard_speed_percent: float = field(default=10.0, metadata={"min": 1.0, "max": 100.0})
+    guard_clearance_mm: float = field(default=3.0, metadata={"min": 0.0, "max": 100.0})
+    contact_axis: Literal["fx_n", "fy_n", "fz_n"] = "fz_n"
     check: GraspCheck = "weight"
     width_tolerance_mm: float = field(default=4.0, metadata={"min": 0.0})
     lift_mm: float = field(default=10.0, metadata={"min": 0.0})
@@ -131,6 +143,16 @@ class GraspResult:
                                  if self.carried_step is not None else None)}
 
 
+def contact_condition(config: GraspConfig) -> MonitorCondition:
+    """The sensor's monitor condition for the program path's descent: ``contact_axis`` below
+    minus the limit of the first ``stop`` guard (3 N by default)."""
+    limit = next((g.limit for g in config.guards if g.action == "stop"), None)
+    if limit is None:
+        raise ValueError("controller.grasp.guards: the program path needs a 'stop' guard "
+                         "whose limit is the contact threshold")
+    return MonitorCondition(config.contact_axis, "<", -abs(limit))
+
+
 def mean_force(sensor: WrenchSensor, samples: int) -> np.ndarray:
     """The mean force vector (Fx, Fy, Fz; N, tool frame) of ``samples`` readings."""
     readings = [sensor.read() for _ in range(samples)]
@@ -164,7 +186,8 @@ def guarded_grasp(arm: Arm, sensor: WrenchSensor, grasp_depth_mm: float,
                              "weight is unknown: the weight check has no threshold")
         threshold = part_weight_n / 2.0
     start: Pose = arm.pose(fresh=False)
-    arm.open_gripper()
+    if not arm.runs_programs:  # the descent program opens them as the arm starts
+        arm.open_gripper()
     sensor.bias()
     result = GraspResult(False, "")
     depth = 0.0
@@ -176,6 +199,44 @@ def guarded_grasp(arm: Arm, sensor: WrenchSensor, grasp_depth_mm: float,
         arm.move_to(start)
         result.reason, result.retreated = reason, True
         return result
+
+    if arm.runs_programs:
+        # the controller stops the descent itself on the sensor's output: one command
+        sensor.set_monitor_condition(contact_condition(config))
+        fast = min(max(0.0, config.free_descent_mm - config.guard_clearance_mm), grasp_depth_mm)
+        lateral = carried if carried is not None else ToolStep()
+        via = start.moved_in_tool_frame(dataclasses.replace(lateral, dz_mm=fast))
+        target = start.moved_in_tool_frame(dataclasses.replace(lateral, dz_mm=grasp_depth_mm))
+        try:
+            descent = arm.guarded_descent(
+                via, target, config.guard_speed_percent,
+                config.free_descent_mm + config.guard_zone_mm - fast)
+        except MotionRejectedError as exc:
+            result.reason = f"descent refused: {exc}"
+            logger.warning("grasp: %s", result.reason)
+            return result
+        if carried is not None:
+            result.carried_step = dataclasses.replace(carried, dz_mm=0.0)
+            if on_carried is not None:
+                on_carried()
+        depth = start.tool_step_to(descent.pose).dz_mm
+        result.depth_mm = depth
+        wrench = sensor.read()
+        result.forces_n.append(wrench.force_n)
+        result.max_force_n = wrench.force_n
+        in_contact_zone = depth >= grasp_depth_mm - config.contact_margin_mm
+        active = [g for g in config.guards if not (in_contact_zone and g.name == "early contact")]
+        guard = first_tripped(wrench, active)
+        if descent.contact and guard is None:
+            guard = next((g for g in active if g.action == "stop"), None) if in_contact_zone \
+                else next((g for g in active if g.name == "early contact"), None)
+        if guard is not None:
+            reason = (f"{guard.name or 'guard'}: {guard.quantity} {guard.op} {guard.limit:g} "
+                      f"at depth {depth:.1f} mm")
+            if guard.action == "retreat":
+                return retreat(reason)
+            result.reason = reason
+        depth = grasp_depth_mm  # the loop below has nothing left to do
 
     zone_end = config.free_descent_mm + config.guard_zone_mm
     while depth < grasp_depth_mm - 1e-9:

@@ -181,13 +181,15 @@ class ValArm(Arm):
             self.link.exchange(self.config.commands.edit_end, self.config.exchange_timeout_s,
                                echo=self.config.echo)
 
-    def _guarded_descent(self, via: Pose, target: Pose, guard_speed_percent: float) -> Descent:
+    def _guarded_descent(self, via: Pose, target: Pose, guard_speed_percent: float,
+                         guard_mm: float) -> Descent:
         """``do set`` the two locations, then one ``execute`` of the descent program; the
         reaction subroutine's text says the input stopped it, and a ``where`` then reads
         where. An arm that did not move at all met an input already high: refused."""
         cfg = self.config
         with self._faulting("programs"):
-            self._load_programs(cfg.program_text(guard_speed_percent))
+            _, rest_mm = self.guard_end(via, target, guard_mm)
+            self._load_programs(cfg.program_text(guard_speed_percent, round(rest_mm, 2)))
         start = self._move_start if self._move_start is not None else self._read_pose()
         for name, pose in (("fpa", via), ("fpd", target)):
             self._command_without_output(cfg.commands.set_location.format(name=name,

@@ -27,7 +27,7 @@ _TEMPLATE_FIELDS: dict[str, dict[str, float]] = {
                      "a_deg": 5.0, "t_deg": 6.0},
 }
 # The fields a program line may use.
-_PROGRAM_FIELDS = {"input": 1001, "guard_speed": 25.0}
+_PROGRAM_FIELDS = {"input": 1001, "guard_speed": 25.0, "rest_mm": 9.0}
 
 
 @dataclass(frozen=True)
@@ -115,10 +115,13 @@ class ValConfig:
     program_guard_speed: the program speed (percent) the descent program is entered with; a
         descent asking for another enters it again.
     program_contact_text: what the reaction subroutine types when the input stopped the arm.
-    program_lines: the programs, name -> lines (``str.format`` fields ``input`` and
-        ``guard_speed``). The descent program moves to location ``fpa`` at full speed, then to
-        ``fpd`` at the guard speed; it must open the jaws as it starts and arm ``REACTI`` on
-        the input before moving. Instruction spellings are VAL II's as documented,
+    program_lines: the programs, name -> lines (``str.format`` fields ``input``,
+        ``guard_speed`` and ``rest_mm``). The descent program moves to location ``fpa`` at full
+        speed, at the guard speed to ``rest_mm`` before ``fpd`` along its approach axis
+        (``APPROS``), then to ``fpd`` at full speed; it must open the jaws as it starts and arm
+        ``REACTI`` on the input before moving. A descent whose ``guard_speed`` or ``rest_mm``
+        differs from the text on the controller enters it again (a part taught to another
+        depth: once). Instruction spellings are VAL II's as documented,
         unconfirmed on a wire: check them on the controller.
     """
 
@@ -145,18 +148,21 @@ class ValConfig:
     commands: ValCommands = field(default_factory=ValCommands)
     programs: bool = False
     program_input: int = field(default=1001, metadata={"min": 1})
-    program_guard_speed: float = field(default=25.0, metadata={"min": 0.01, "max": 100.0})
+    program_guard_speed: float = field(default=10.0, metadata={"min": 0.01, "max": 100.0})
     program_contact_text: str = "FPCONTACT"
     program_lines: dict[str, tuple[str, ...]] = field(default_factory=lambda: {
         "fpstop": ("TYPE FPCONTACT", "STOP"),
         "fpdesc": ("SPEED 100", "OPEN", "REACTI {input}, fpstop", "MOVES fpa",
-                   "SPEED {guard_speed:g}", "MOVES fpd", "IGNORE {input}"),
+                   "SPEED {guard_speed:g}", "APPROS fpd, {rest_mm:.2f}", "SPEED 100",
+                   "MOVES fpd", "IGNORE {input}"),
     })
 
-    def program_text(self, guard_speed: float | None = None) -> dict[str, tuple[str, ...]]:
+    def program_text(self, guard_speed: float | None = None,
+                     rest_mm: float = 0.0) -> dict[str, tuple[str, ...]]:
         """The programs as entered on the controller (fields filled in)."""
         speed = self.program_guard_speed if guard_speed is None else guard_speed
-        return {name: tuple(line.format(input=self.program_input, guard_speed=speed)
+        return {name: tuple(line.format(input=self.program_input, guard_speed=speed,
+                                        rest_mm=rest_mm)
                             for line in lines)
                 for name, lines in self.program_lines.items()}
 
@@ -182,6 +188,7 @@ class ValConfig:
                     text = line.format(**_PROGRAM_FIELDS)
                 except (KeyError, IndexError, ValueError) as exc:
                     raise ValueError(f"program_lines.{name}[{i}]: {line!r} does not format "
-                                     f"with the fields input, guard_speed: {exc!r}") from exc
+                                     f"with the fields input, guard_speed, rest_mm: "
+                                     f"{exc!r}") from exc
                 if not text.strip() or not text.isascii() or any(c in text for c in "\r\n"):
                     raise ValueError(f"program_lines.{name}[{i}]: must be one ASCII line")

@@ -62,16 +62,20 @@ def test_programs_are_entered_once_and_listed_back(emulator):
 def test_one_execute_per_descent_that_reaches_its_target(emulator, backing):
     with program_arm(emulator) as arm:
         lines = heard(emulator)
-        descent = arm.guarded_descent(down(20.0), down(30.0), 25.0)
+        arm.guarded_descent(down(10.0), down(20.0), 25.0, 4.0)
+        # the guarded part ends 6 mm before the target: the program is entered again once
+        assert "edit fpdesc" in lines and "APPROS fpd, 6.00" in lines
+        lines.clear()
+        descent = arm.guarded_descent(down(20.0), down(30.0), 25.0, 4.0)
     assert not descent.contact and descent.pose == down(30.0)
     assert backing.pose().z_mm == pytest.approx(HOME.z_mm - 30.0)
-    assert [line.split()[0] for line in lines if line != "where"] == ["do", "do", "ex"]
+    assert [line.split()[0] for line in lines] == ["do", "do", "ex"]
 
 
 def test_the_input_stops_the_descent_and_where_reads_the_stop(emulator, backing):
     emulator.monitor.set_input(1001, lambda: HOME.z_mm - backing.pose().z_mm >= 24.0)
     with program_arm(emulator) as arm:
-        descent = arm.guarded_descent(down(20.0), down(30.0), 25.0)
+        descent = arm.guarded_descent(down(20.0), down(30.0), 25.0, 4.0)
     assert descent.contact
     assert HOME.z_mm - descent.pose.z_mm == pytest.approx(24.0, abs=0.51)
 
@@ -80,7 +84,7 @@ def test_an_input_high_before_the_descent_refuses_it(emulator, backing):
     emulator.monitor.set_input(1001, lambda: True)
     with program_arm(emulator) as arm:
         with pytest.raises(MotionRejectedError, match="high before the descent"):
-            arm.guarded_descent(down(20.0), down(30.0), 25.0)
+            arm.guarded_descent(down(20.0), down(30.0), 25.0, 4.0)
     assert backing.moves == []
 
 
@@ -98,7 +102,7 @@ def test_a_descent_beyond_the_safety_limits_is_refused_before_the_wire(emulator,
     with program_arm(emulator) as arm:
         lines = heard(emulator)
         with pytest.raises(MotionRejectedError):
-            arm.guarded_descent(down(20.0), down(300.0), 25.0)
+            arm.guarded_descent(down(20.0), down(300.0), 25.0, 4.0)
     assert [line for line in lines if line != "where"] == [] and backing.moves == []
 
 
@@ -118,7 +122,7 @@ def test_abort_stops_the_descent_program_at_once(emulator, backing):
 
         def descend():
             try:
-                arm.guarded_descent(down(20.0), down(30.0), 25.0)
+                arm.guarded_descent(down(20.0), down(30.0), 25.0, 4.0)
             except Exception as exc:  # noqa: BLE001 - the test looks at it
                 errors.append(exc)
 
@@ -138,7 +142,7 @@ def test_without_programs_the_arm_runs_no_descent(emulator):
     with ValArm(ValConfig(port=emulator.url), LIMITS) as arm:
         assert not arm.runs_programs
         with pytest.raises(MotionRejectedError, match="runs no guarded descent"):
-            arm.guarded_descent(down(20.0), down(30.0), 25.0)
+            arm.guarded_descent(down(20.0), down(30.0), 25.0, 4.0)
 
 
 def test_a_lost_link_during_a_program_is_a_fault(emulator, backing):
@@ -147,6 +151,6 @@ def test_a_lost_link_during_a_program_is_a_fault(emulator, backing):
     with program_arm(emulator, move_timeout_s=0.5) as arm:
         emulator.set_faults(ValFaults(drop_link_after_lines=2))
         with pytest.raises((DeviceFaultError, DeviceTimeoutError)):
-            arm.guarded_descent(down(20.0), down(30.0), 25.0)
+            arm.guarded_descent(down(20.0), down(30.0), 25.0, 4.0)
         with pytest.raises(DeviceFaultError):
             arm.move_tool(ToolStep(dz_mm=1.0))

@@ -9,7 +9,8 @@ ever silently skipped when it runs. The instructions (case-insensitive):
 - ``OPEN`` / ``CLOSE``: the jaws open / close as the next motion starts (no wait of their own);
   ``OPENI`` / ``CLOSEI``: at once, after the motion, then the hand time;
 - ``MOVE loc`` / ``MOVES loc``: to a location set with ``DO SET`` or ``POINT`` (joint and
-  straight-line motion are timed alike); ``DRAW dx,dy,dz``: by that much in the base frame;
+  straight-line motion are timed alike); ``APPRO loc, d`` / ``APPROS loc, d``: to ``d`` mm
+  before ``loc`` along its approach axis; ``DRAW dx,dy,dz``: by that much in the base frame;
 - ``REACTI sig[, prog]``: from now on a motion stops at once when input ``sig`` is high, then
   ``prog`` runs as a subroutine (none: the program stops); an input already high when armed
   reacts at once. ``IGNORE sig``: disarms it;
@@ -26,7 +27,7 @@ import threading
 from collections.abc import Callable
 from dataclasses import dataclass, field
 
-from drivers.core.pose import Pose
+from drivers.core.pose import Pose, ToolStep
 from drivers.core.timing import VAL_SPEED_MAX, VAL_SPEED_MIN
 from drivers.interfaces import Arm
 
@@ -42,6 +43,8 @@ _FORMS: dict[str, re.Pattern[str]] = {
     "open": re.compile(""), "close": re.compile(""),
     "openi": re.compile(""), "closei": re.compile(""),
     "move": re.compile(rf"(#?{_NAME})"), "moves": re.compile(rf"(#?{_NAME})"),
+    "appro": re.compile(rf"({_NAME})\s*,\s*({_NUMBER})"),
+    "appros": re.compile(rf"({_NAME})\s*,\s*({_NUMBER})"),
     "draw": re.compile(rf"({_NUMBER})\s*,\s*({_NUMBER})\s*,\s*({_NUMBER})"),
     "reacti": re.compile(rf"(\d+)(?:\s*,\s*({_NAME}))?"),
     "ignore": re.compile(r"(\d+)"),
@@ -72,6 +75,22 @@ def parse_instruction(line: str) -> tuple[str, tuple[str, ...]]:
     return name, tuple(g for g in match.groups() if g is not None)
 
 
+_MOTIONS = frozenset({"move", "moves", "appro", "appros", "draw"})
+_PASSING = frozenset({"speed", "reacti", "ignore", "open", "close"})  # no stop of their own
+
+
+def _motion_follows(rest: list[str]) -> bool:
+    """Whether the next instruction that acts on the arm is a motion (the path goes on: no
+    settling between the two); a hand instruction, TYPE, STOP or the end stop it."""
+    for line in rest:
+        name = line.strip().split(None, 1)[0].lower() if line.strip() else ""
+        if name in _MOTIONS:
+            return True
+        if name not in _PASSING:
+            return False
+    return False
+
+
 def check_instruction(line: str) -> None:
     """Raise InstructionError unless ``line`` is an instruction ``ProgramRun`` interprets."""
     parse_instruction(line)
@@ -96,6 +115,7 @@ class ProgramRun:
     _armed: dict[int, str | None] = field(default_factory=dict)
     _first_motion: bool = True
     _pending_hand: bool | None = None  # OPEN (False) / CLOSE (True) at the next motion
+    _settle: bool = True  # the motion under way ends where the arm stops
 
     def abort(self) -> None:
         self.aborted.set()
@@ -112,9 +132,11 @@ class ProgramRun:
         if depth > 8:
             raise InstructionError("Too many nested subroutines")
         try:
-            for line in self.programs[name]:
+            lines = self.programs[name]
+            for i, line in enumerate(lines):
                 if self.aborted.is_set():
                     raise ProgramRun._Stop
+                self._settle = not _motion_follows(lines[i + 1:])
                 self._step(*parse_instruction(line), depth=depth)
         except ProgramRun._Stop:
             if depth:
@@ -133,6 +155,11 @@ class ProgramRun:
             if target is None:
                 raise InstructionError("Undefined location")
             self._motion(target, depth)
+        elif name in ("appro", "appros"):
+            location = self.locations.get(args[0])
+            if location is None:
+                raise InstructionError("Undefined location")
+            self._motion(location.moved_in_tool_frame(ToolStep(dz_mm=-float(args[1]))), depth)
         elif name == "draw":
             dx, dy, dz = (float(a) for a in args)
             here = arm.pose(fresh=False)
@@ -164,7 +191,7 @@ class ProgramRun:
         setup, self._first_motion = self._first_motion, False
         _, stopped = self.arm.move_until(
             target, lambda: self.aborted.is_set() or self._tripped() is not None,
-            speed_factor=self._speed / 100.0, setup=setup)
+            speed_factor=self._speed / 100.0, setup=setup, settle=self._settle)
         if self.aborted.is_set():
             raise ProgramRun._Stop
         if stopped:
