@@ -142,7 +142,8 @@ class SimArm(Arm):
         delta = np.array(self.cell.joint_angles_deg(), dtype=float) - start_q
         seconds = timing.move_seconds(delta, self.speed_percent)
         if timing.clock.virtual:
-            timing.motion(seconds)
+            timing.motion(timing.config.arm.t0_s, "setup")
+            timing.motion(seconds - timing.config.arm.t0_s)
             return self.cell.arm_pose()
         self._animate(start, target, seconds, begin)
         reached = self.cell.arm_pose()
@@ -175,7 +176,8 @@ class SimArm(Arm):
                                                     profile_fraction(elapsed, profile_s)))
                 wait_until(arm.t0_s + elapsed)
             self.cell.move_arm(final)
-        timing.motion_s += seconds
+        timing.note(arm.t0_s, "setup")
+        timing.note(seconds - arm.t0_s)
 
     # -- program motions -----------------------------------------------------------------
     @property
@@ -249,10 +251,12 @@ class SimArm(Arm):
             if settle or stopped_at is not None:
                 elapsed += timing.config.arm.settle_s
             if wall:
-                timing.motion_s += elapsed
+                timing.note(t0, "setup")
+                timing.note(elapsed - t0)
                 wait_until(elapsed)
             else:
-                timing.motion(elapsed)
+                timing.motion(t0, "setup")
+                timing.motion(elapsed - t0)
         self._reached = cell.arm_pose()
         return self._reached, stopped_at is not None
 
@@ -319,9 +323,9 @@ class SimArm(Arm):
             timing.val_wire(cell_timing.gripper_bytes(closed))
             hand_s = timing.config.arm.hand_time_s
             if timing.clock.virtual:
-                timing.motion(hand_s)
+                timing.motion(hand_s, "hand")
             else:  # the jaws' own simulation counts as hand time
-                timing.motion_s += hand_s
+                timing.note(hand_s, "hand")
                 timing.clock.advance(begin + hand_s - timing.clock.now())
         return width
 
@@ -375,7 +379,7 @@ class SimCamera(Camera):
         if clock.virtual:
             now = clock.now()
             wait = (-now) % period
-            clock.advance(wait + cam.delivery_s)
+            timing.wait(wait + cam.delivery_s, "camera")
             return Frame(self.cell.render(), clock.now())
         frame = Frame(self._expose(cam.exposure_s), clock.now())
         self._delivered.append(frame)
@@ -419,7 +423,7 @@ class SimWrenchSensor(WrenchSensor):
             # The next sample, then (in process) one query and record on the ATI line; the
             # ATI emulator's line paces itself.
             period = 1.0 / timing.config.wrench_rate_hz
-            timing.clock.advance((-timing.clock.now()) % period)
+            timing.wait((-timing.clock.now()) % period, "sensor")
             timing.wire(cell_timing.ATI_QR_BYTES, timing.config.ati_baud)
         return Wrench(*(float(v) for v in self.cell.wrench() - self._offset))
 

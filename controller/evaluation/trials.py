@@ -194,10 +194,9 @@ def run_trials(system: str, model: TrainedModel, config, trials: int, seed: int,
             outcomes.append(result.outcome)
             per_iteration.extend(result.seconds_per_iteration)
             if split0 is not None:
-                wire, motion = (b - a for a, b in zip(split0, _split(devices.timing),
-                                                       strict=True))
-                splits.append({"total": devices.clock() - start_s, "wire": wire,
-                               "motion": motion})
+                split1 = _split(devices.timing)
+                splits.append({"total": devices.clock() - start_s,
+                               **{k: split1[k] - split0[k] for k in split0}})
             if on_trial is not None:
                 on_trial()
     return {"states": states, "grasps": grasps, "seconds_per_iteration": per_iteration,
@@ -207,9 +206,10 @@ def run_trials(system: str, model: TrainedModel, config, trials: int, seed: int,
             "visible": visible if measure_visible else None}
 
 
-def _split(timing) -> tuple[float, float] | None:
-    """(wire, motion) seconds charged so far on the in-process cell's timing (None: none)."""
-    return None if timing is None else (timing.wire_s, timing.motion_s)
+def _split(timing) -> dict[str, float] | None:
+    """The seconds the in-process cell's timing has spent so far, by kind (``wire``, ``setup``,
+    ``motion``, ``hand``, ``sensor``, ``camera``; None: no timing)."""
+    return None if timing is None else dict(timing.spent)
 
 
 class TimedTruth:
@@ -231,12 +231,15 @@ class TimedTruth:
 
 
 def _median_split(splits) -> dict | None:
-    """Per trial (positioning and grasp), the median cell seconds in all, on the serial lines
-    (``wire``), in arm and hand motion (``motion``), and the rest (camera and sensor waits)."""
+    """The time budget: per trial (positioning and grasp), the median cell seconds in all and
+    by kind: on the serial lines (``wire``), the controller's set-up of each command that
+    moves (``setup``), arm motion and settling (``motion``), the hand (``hand``), waits for
+    sensor samples (``sensor``) and camera frames (``camera``), and the rest (``other``)."""
     if not splits:
         return None
-    out = {k: float(np.median([s[k] for s in splits])) for k in ("total", "wire", "motion")}
-    out["other"] = float(np.median([s["total"] - s["wire"] - s["motion"] for s in splits]))
+    kinds = [k for k in splits[0] if k != "total"]
+    out = {k: float(np.median([s[k] for s in splits])) for k in ("total", *kinds)}
+    out["other"] = float(np.median([s["total"] - sum(s[k] for k in kinds) for s in splits]))
     return out
 
 

@@ -55,6 +55,11 @@ def gripper_bytes(closed: bool) -> int:
     return val_exchange_bytes(_COMMANDS.gripper_close if closed else _COMMANDS.gripper_open)
 
 
+# What the time budget (``CellTiming.spent``, the evaluate report's ``time_split_s``) splits a
+# trial's cell seconds into: serial lines, controller set-up (``t0_s`` of a command that
+# moves), arm motion (profile and settling), hand, sensor sample waits, camera frame waits.
+BUDGET = ("wire", "setup", "motion", "hand", "sensor", "camera")
+
 # ATI: "QR\r", its echo, then one ASCII record (status, six comma-separated 6-wide values,
 # CR LF) and the ">" prompt, as the ATI emulator writes them.
 ATI_QR_BYTES = 3 + 4 + (1 + 6 * 7) + 2 + 1
@@ -115,8 +120,10 @@ class CellTiming:
 
     charge_wire: True in process (the virtual clock accounts the VAL and ATI lines' time);
     False behind the emulators, whose lines pace the bytes themselves.
-    wire_s / motion_s: seconds charged so far to the lines and to arm and hand motion
-    (``finepos bench sim`` reports them); command_began_s: see ``begin_command``.
+    wire_s / motion_s: seconds charged so far to the lines and to arm and hand motion (set-up,
+    profile, settling, hand; ``finepos bench sim`` reports them); spent: the same seconds by
+    ``BUDGET`` kind, with the sensor's and the camera's waits; command_began_s: see
+    ``begin_command``.
     """
 
     config: TimingConfig
@@ -125,6 +132,7 @@ class CellTiming:
     wire_s: float = field(default=0.0)
     motion_s: float = field(default=0.0)
     command_began_s: float | None = None
+    spent: dict[str, float] = field(default_factory=lambda: dict.fromkeys(BUDGET, 0.0))
 
     def begin_command(self) -> None:
         """Note that a command line has just arrived (the VAL emulator calls this): on a wall
@@ -142,16 +150,28 @@ class CellTiming:
         if self.charge_wire:
             seconds = self.config.wire_time_s(n_bytes, baud)
             self.wire_s += seconds
+            self.spent["wire"] += seconds
             self.clock.advance(seconds)
 
     def val_wire(self, n_bytes: int) -> None:
         """A VAL exchange of ``n_bytes`` (both directions)."""
         self.wire(n_bytes, self.config.val_baud)
 
-    def motion(self, seconds: float) -> None:
-        """Arm or hand motion taking ``seconds``."""
-        self.motion_s += seconds
+    def motion(self, seconds: float, kind: str = "motion") -> None:
+        """Arm or hand motion taking ``seconds`` (``kind``: motion, setup or hand)."""
+        self.note(seconds, kind)
         self.clock.advance(seconds)
+
+    def note(self, seconds: float, kind: str = "motion") -> None:
+        """Count ``seconds`` of arm or hand motion that pass on their own (wall clock)."""
+        self.motion_s += seconds
+        self.spent[kind] += seconds
+
+    def wait(self, seconds: float, kind: str) -> None:
+        """Wait ``seconds`` for a device (``kind``: sensor or camera)."""
+        if seconds > 0:
+            self.spent[kind] += seconds
+            self.clock.advance(seconds)
 
     def move_seconds(self, delta_deg, speed_percent: float) -> float:
         """The model's time of a move with these joint travels (t0 + profile + settle)."""

@@ -123,3 +123,19 @@ def test_a_frame_exposed_during_a_move_is_blurred_and_one_frame_late(cell):
         mover.join()
         assert camera.blurred_frames > 0
         assert timing.motion_s > CONFIG.arm.t0_s + CONFIG.arm.settle_s
+
+
+def test_the_budget_splits_every_cell_second_by_kind(devices):
+    arm, camera, sensor, timing = devices
+    start = timing.clock.now()
+    before = dict(timing.spent)
+    arm.move_tool(ToolStep(5.0, 0.0, 0.0, 0.0))
+    arm.close_gripper()
+    sensor.read()
+    camera.grab()
+    spent = {k: timing.spent[k] - before[k] for k in cell_timing.BUDGET}
+    assert spent["setup"] == pytest.approx(CONFIG.arm.t0_s)
+    assert spent["hand"] == pytest.approx(CONFIG.arm.hand_time_s)
+    assert spent["motion"] > CONFIG.arm.settle_s
+    assert spent["wire"] > 0 and spent["camera"] > 0 and spent["sensor"] >= 0
+    assert sum(spent.values()) == pytest.approx(timing.clock.now() - start)
