@@ -150,7 +150,7 @@ class FinePositioner:
     def move_to(self, target: Pose) -> None:
         """Move there in steps within the safety limits (``safety.max_step_mm``/``_deg``)."""
         limits = self.config.safety
-        transfer(self.devices.arm, target, limits.max_step_mm, limits.max_step_deg)
+        transfer(self.devices.arm, target, limits)
 
     # -- acquisition and training ----------------------------------------------------------
     def acquire(self, name: str, seed: int = 0, progress: bool = True) -> Dataset:

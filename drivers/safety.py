@@ -2,11 +2,14 @@
 
 Applied in one place (``drivers.interfaces.Arm``) to every backend. A command beyond a limit is
 either rejected (MotionRejectedError, nothing moves) or clipped onto the limit, as configured;
-either way it is logged.
+either way it is logged. A motion longer than the step limits is split into commands within
+them here, and only here (``split_step``, ``split_target``): the loop, acquisition and the
+calibrations call these.
 """
 
 from __future__ import annotations
 
+import dataclasses
 import logging
 import math
 from dataclasses import dataclass, field
@@ -79,6 +82,45 @@ def clip_step(step: ToolStep, limits: SafetyLimits) -> tuple[ToolStep, str | Non
         dphi = math.copysign(limits.max_step_deg, dphi)
     clipped = ToolStep(step.dx_mm * scale, step.dy_mm * scale, step.dz_mm * scale, dphi)
     return clipped, ("; ".join(reasons) or None)
+
+
+def pieces(step: ToolStep, limits: SafetyLimits | None) -> int:
+    """How many equal commands ``step`` takes within ``limits`` (None: one)."""
+    if limits is None:
+        return 1
+    return max(1, math.ceil(max(step.translation_mm / limits.max_step_mm,
+                                abs(step.dphi_deg) / limits.max_step_deg) - 1e-9))
+
+
+def split_step(step: ToolStep, limits: SafetyLimits | None, *,
+               turn_only: bool = False) -> list[ToolStep]:
+    """``step`` as consecutive tool steps within ``limits``: the translation first, in equal
+    parts, then the turn in equal parts, the last translation part and the first turn part in
+    one command. A tool step translates in the tool frame before it turns, so the commands end
+    where the whole step would; within the limits, it is ``[step]``. ``turn_only``: only the
+    turn is split, a translation beyond ``max_step_mm`` is sent whole, for the safety check to
+    reject or clip (the positioning loop: so long a correction is no fine step)."""
+    if limits is None:
+        return [step]
+    moves = 1 if turn_only else \
+        max(1, math.ceil(step.translation_mm / limits.max_step_mm - 1e-9))
+    turns = max(1, math.ceil(abs(step.dphi_deg) / limits.max_step_deg - 1e-9))
+    if moves == turns == 1:
+        return [step]
+    part = ToolStep(step.dx_mm / moves, step.dy_mm / moves, step.dz_mm / moves, 0.0)
+    turn = step.dphi_deg / turns
+    return [part] * (moves - 1) + [dataclasses.replace(part, dphi_deg=turn)] + \
+        [ToolStep(0.0, 0.0, 0.0, turn)] * (turns - 1)
+
+
+def split_target(here: Pose, target: Pose, limits: SafetyLimits | None) -> list[Pose]:
+    """The absolute targets of a move from ``here`` to ``target`` within ``limits``: equal
+    fractions of the tool step between them, each reached from the one before."""
+    step = here.tool_step_to(target)
+    n = pieces(step, limits)
+    fractions = [i / n for i in range(1, n + 1)]
+    return [here.moved_in_tool_frame(ToolStep(step.dx_mm * f, step.dy_mm * f, step.dz_mm * f,
+                                              step.dphi_deg * f)) for f in fractions]
 
 
 def workspace_violation(position_mm, limits: SafetyLimits) -> str | None:

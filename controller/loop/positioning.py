@@ -44,6 +44,7 @@ from controller.systems.estimator import (
 from drivers.core.errors import MotionRejectedError
 from drivers.core.pose import ToolStep
 from drivers.interfaces import Arm, Camera, Frame
+from drivers.safety import split_step
 
 logger = logging.getLogger(__name__)
 
@@ -461,22 +462,15 @@ class PositioningLoop:
 
     def _move(self, record: IterationRecord, kind: LoopKind, cost: float,
               clock: tuple[float, ...], image) -> float | str:
-        """Send the look's commanded step to the arm (a turn beyond the arm's
-        ``max_step_deg`` in equal commands within it, the translation with the first) and log
+        """Send the look's commanded step to the arm (split within the arm's step limits,
+        ``drivers.safety.split_step``: a turn beyond ``max_step_deg`` in equal commands, the
+        translation with the first) and log
         the look as ``kind``, its loops and error those after the move. Returns the
         look-and-move's wall time (s), or why the safety layer rejected a command (the look
         is then logged as a stop)."""
         t2 = clock[2] if len(clock) > 2 else time.perf_counter()
-        step = record.commanded
-        count = 1
-        limits = getattr(self.arm, "limits", None)
-        if limits is not None and limits.max_step_deg > 0:
-            count = max(1, math.ceil(abs(step.dphi_deg) / limits.max_step_deg - 1e-9))
-        turn = step.dphi_deg / count
-        # a tool step translates in the tool frame before it turns: the translation sent
-        # with the first command ends where the whole step would
-        commands = [dataclasses.replace(step, dphi_deg=turn)] + \
-            [ToolStep(0.0, 0.0, 0.0, turn)] * (count - 1)
+        commands = split_step(record.commanded, getattr(self.arm, "limits", None),
+                              turn_only=True)
         sent = []
         try:
             for command in commands:

@@ -25,6 +25,7 @@ from calibration_free.dataset import (
 )
 from drivers.core.pose import Pose, ToolStep
 from drivers.interfaces import Arm, Camera
+from drivers.safety import SafetyLimits, split_target
 
 logger = logging.getLogger(__name__)
 
@@ -45,16 +46,11 @@ def serpentine(offsets: np.ndarray) -> np.ndarray:
     return np.concatenate(ordered)
 
 
-def transfer(arm: Arm, target: Pose, max_step_mm: float, max_step_deg: float) -> None:
-    """Move to ``target`` in segments no longer than the given step limits."""
-    here = arm.pose()
-    step = here.tool_step_to(target)
-    n = max(1, int(np.ceil(max(step.translation_mm / max_step_mm,
-                               abs(step.dphi_deg) / max_step_deg) - 1e-9)))
-    for i in range(1, n + 1):
-        f = i / n
-        arm.move_to(here.moved_in_tool_frame(
-            ToolStep(step.dx_mm * f, step.dy_mm * f, step.dz_mm * f, step.dphi_deg * f)))
+def transfer(arm: Arm, target: Pose, limits: SafetyLimits | None) -> None:
+    """Move to ``target`` in segments within the step limits (``drivers.safety.split_target``;
+    None: one move)."""
+    for pose in split_target(arm.pose(), target, limits):
+        arm.move_to(pose)
 
 
 def acquire(arm: Arm, camera: Camera, nominal: Pose, offsets: np.ndarray, *,
@@ -74,12 +70,10 @@ def acquire(arm: Arm, camera: Camera, nominal: Pose, offsets: np.ndarray, *,
     separate approaches their mean averages it. The set's metadata
     ``taught_frames`` says how many come first (the Hough system's PSOM takes the grid's
     images only)."""
-    max_mm = limits.max_step_mm if limits else 1e9
-    max_deg = limits.max_step_deg if limits else 1e9
     images, labels, truth = [], [], []
     t0 = time.perf_counter()
     if taught_frames > 0:
-        transfer(arm, nominal, max_mm, max_deg)
+        transfer(arm, nominal, limits)
         for i in range(taught_frames):
             side = math.radians(360.0 * i / taught_frames)
             arm.move_to(nominal.moved_in_tool_frame(ToolStep(
@@ -94,14 +88,14 @@ def acquire(arm: Arm, camera: Camera, nominal: Pose, offsets: np.ndarray, *,
     for dx, dy, dphi in tqdm(offsets, desc=f"acquire {name}", unit="img",
                              disable=None if progress else True, leave=False):
         target = nominal.moved_in_tool_frame(ToolStep(-dx, -dy, 0.0, -dphi))
-        transfer(arm, target, max_mm, max_deg)
+        transfer(arm, target, limits)
         reached = arm.pose()
         images.append(camera.grab().image)
         back = reached.tool_step_to(nominal)
         labels.append((back.dx_mm, back.dy_mm, back.dphi_deg))
         if ground_truth is not None:
             truth.append(ground_truth())
-    transfer(arm, nominal, max_mm, max_deg)
+    transfer(arm, nominal, limits)
     meta = {"set": name, "count": len(labels), "taught_frames": max(taught_frames, 0),
             "seconds": time.perf_counter() - t0,
             "nominal_pose": nominal.as_dict(), **(metadata or {})}

@@ -65,6 +65,7 @@ from controller.loop.grasp import guarded_grasp
 from controller.systems.estimator import full_step
 from drivers.core import parts
 from drivers.core.pose import Pose, ToolStep, wrap_deg
+from drivers.safety import split_step
 
 logger = logging.getLogger(__name__)
 
@@ -180,9 +181,8 @@ class _Turner:
         self._grasp(f"to turn the part to {turn:g} deg")
         # turned in moves within the safety layer's limit (``safety.max_step_deg``)
         total = self.sign * (turn - self.current)
-        pieces = max(1, math.ceil(abs(total) / self.fp.config.safety.max_step_deg - 1e-9))
-        for _ in range(pieces):
-            self.arm.move_tool(ToolStep(dphi_deg=total / pieces))
+        for piece in split_step(ToolStep(dphi_deg=total), self.fp.config.safety):
+            self.arm.move_tool(piece)
         self.arm.move_tool(ToolStep(dz_mm=self.grasp_cfg.lift_mm))
         self.arm.open_gripper()
         self.current = turn

@@ -166,7 +166,7 @@ def _test_set(config, state: CellState, seed: int) -> Dataset:
     offsets = random_offsets(np.random.default_rng(seed), acq.test_count, acq.nn2.a_mm, b_deg)
     limits = train_cfg.safety
     with open_devices(train_cfg, seed=seed) as devices:
-        transfer(devices.arm, state.nominal_pose, limits.max_step_mm, limits.max_step_deg)
+        transfer(devices.arm, state.nominal_pose, limits)
         return acquire(devices.arm, devices.camera, state.nominal_pose, offsets, name="test",
                        limits=limits, progress=False)
 

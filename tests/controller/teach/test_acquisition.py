@@ -31,7 +31,7 @@ def test_transfer_splits_long_moves_within_limits():
     limits = SafetyLimits(max_step_mm=10.0, max_step_deg=20.0)
     arm = active(FakeArm(limits, start=NOMINAL))
     target = NOMINAL.moved_in_tool_frame(ToolStep(35.0, -12.0, 0.0, 70.0))
-    transfer(arm, target, limits.max_step_mm, limits.max_step_deg)
+    transfer(arm, target, limits)
     assert len(arm.moves) == 4
     s = arm.pose().tool_step_to(target)
     assert abs(s.dx_mm) < 1e-6 and abs(s.dy_mm) < 1e-6 and abs(s.dphi_deg) < 1e-6
