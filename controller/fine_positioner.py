@@ -17,9 +17,7 @@ from pathlib import Path
 
 import numpy as np
 
-from calibration_free.baselines.align.rezero import rezero_align
 from calibration_free.dataset import Dataset
-from calibration_free.rezero import CLIPPED_WARN_SHARE, rezero
 from controller.config import recipe_of
 from controller.loop.grasp import GraspResult, guarded_grasp
 from controller.loop.iteration_log import IterationLog
@@ -27,13 +25,10 @@ from controller.loop.positioning import (
     LoopConfig,
     PositioningLoop,
     PositioningResult,
-    mean_scatter,
-    step_scatter,
 )
 from controller.recipe import Recipe, recipe_of_model, with_recipe_stored
 from controller.systems.base import TrainedModel
-from controller.systems.estimator import full_step
-from controller.systems.registry import SYSTEMS
+from controller.systems.registry import DEFAULT_SYSTEM, SYSTEMS
 from controller.teach.acquisition import acquire, grid_for, random_set, transfer
 from controller.teach.cell_state import CellState
 from controller.teach.heading_zero import default_range, headings, read_heading_zero
@@ -43,8 +38,10 @@ from drivers.core.pose import Pose
 
 logger = logging.getLogger(__name__)
 
-# The systems ``rezero`` moves the zero of.
-REZERO_SYSTEMS = ("gabor", "align")
+# The systems ``rezero`` moves the zero of, and those that also keep a zero by heading.
+REZERO_SYSTEMS = tuple(name for name, system in SYSTEMS.items() if system.rezeroes)
+HEADING_ZERO_SYSTEMS = tuple(name for name, system in SYSTEMS.items()
+                             if system.zero_by_heading)
 # Frames ``rezero`` takes at the taught pose (training pinned the nets on 4 + 4): read three
 # at a time, eight means; fewer leave more of the dark frame's noise in the zero
 # (docs/decisions/0011-rezero-in-the-cells-light.md). 0.8 s at 30 frames a second. Where the
@@ -90,7 +87,7 @@ class FinePositioner:
         """Where the acquired set ``name`` (nn1, nn2, test) is stored."""
         return self.state_dir / "datasets" / f"{name}.npz"
 
-    def model_path(self, system: str = "gabor") -> Path:
+    def model_path(self, system: str = DEFAULT_SYSTEM) -> Path:
         """Where ``system``'s trained model is stored."""
         return self.state_dir / f"model-{system}{SYSTEMS[system].suffix}"
 
@@ -187,7 +184,7 @@ class FinePositioner:
         data.save(self.dataset_path(name))
         return data
 
-    def train(self, system: str = "gabor", recipe: Recipe | None = None) -> TrainedModel:
+    def train(self, system: str = DEFAULT_SYSTEM, recipe: Recipe | None = None) -> TrainedModel:
         """Train ``system`` on the stored nn1 and nn2 sets with ``recipe``, store its model
         (the recipe written into it) and use it.
 
@@ -231,7 +228,8 @@ class FinePositioner:
         loop = self.config.controller.loop
         return loop if model is None else recipe_of_model(model.model).apply_loop(loop)
 
-    def load_model(self, path: str | Path | None = None, system: str = "gabor") -> TrainedModel:
+    def load_model(self, path: str | Path | None = None,
+                   system: str = DEFAULT_SYSTEM) -> TrainedModel:
         """Load and use a model file (default: ``system``'s stored model), checked to be
         taught on the taught part.
 
@@ -242,12 +240,13 @@ class FinePositioner:
         state = self.state()
         file = Path(path) if path is not None else self.model_path(system)
         if not file.is_file():
-            train = "finepos train" + ("" if system == "gabor" else f" --system {system}")
+            train = "finepos train" + ("" if system == DEFAULT_SYSTEM
+                                       else f" --system {system}")
             raise FineposError(f"{file}: no trained {system} model; run `{train}` first")
         self._model = SYSTEMS[system].load(file, state)
         return self._model
 
-    def rezero(self, frames: int = REZERO_FRAMES, system: str = "gabor",
+    def rezero(self, frames: int = REZERO_FRAMES, system: str = DEFAULT_SYSTEM,
                heading_step_deg: float | None = None,
                heading_range_deg: tuple[float, float] | None = None
                ) -> tuple[TrainedModel, dict]:
@@ -284,11 +283,13 @@ class FinePositioner:
         """
         if isinstance(frames, bool) or not isinstance(frames, int) or frames < 1:
             raise FineposError(f"rezero: frames must be a whole number >= 1, got {frames!r}")
-        if system not in REZERO_SYSTEMS:
+        impl = SYSTEMS[system]
+        if not impl.rezeroes:
             raise FineposError(f"rezero: the {system} system does not re-zero (only "
                                f"{' and '.join(REZERO_SYSTEMS)})")
-        if heading_step_deg is not None and system != "gabor":
-            raise FineposError(f"rezero: a zero by heading is the gabor system's; the {system} "
+        if heading_step_deg is not None and not impl.zero_by_heading:
+            raise FineposError(f"rezero: a zero by heading is the "
+                               f"{' and '.join(HEADING_ZERO_SYSTEMS)} system's; the {system} "
                                "system keeps one zero")
         model = self.load_model(system=system)
         if heading_step_deg is not None:  # refused before the arm moves
@@ -296,46 +297,16 @@ class FinePositioner:
                              or default_range(model.model.kappa, heading_step_deg))
         self.move_to(self.state().nominal_pose)
         images = [self.devices.camera.grab().image for _ in range(frames)]
-        loop = self.loop_config(model)
-        average, scatter = 1, None
-        if system == "gabor":
-            estimator = SYSTEMS[system].estimator(model)
-            scatter = step_scatter([step for step in (full_step(estimator, image)
-                                                      for image in images) if step is not None])
-            if loop.settle_average == "frames":
-                average = loop.settle_count(scatter)
-                if average > loop.settle_frames:  # the bounds ask for more: at least
-                    # two means, and whole ones (a short last mean reads differently)
-                    need = average * max(2, math.ceil(len(images) / average))
-                    images += [self.devices.camera.grab().image
-                               for _ in range(need - len(images))]
-                    frames = len(images)  # each heading's reading takes as many
-        if system == "align":
-            done = rezero_align(model.model, images)
-            moved = done.model
-        else:
-            done = rezero(dataclasses.replace(model.model, heading_zero=None), images,
-                          average=average)
-            moved = done.bundle
-        report = done.report()
-        if system == "gabor":
-            report["frame_scatter"] = None if scatter is None else [round(v, 4)
-                                                                     for v in scatter]
-            _warn_if_too_noisy(loop, scatter)
-            report["heading_zero"] = None
-            if done.clipped_share > CLIPPED_WARN_SHARE:
-                logger.warning("rezero: the camera clips %.0f%% of the part's pixels at the "
-                               "taught pose in this light (a channel at 255): bring its "
-                               "exposure down until the part's brightest face is not white "
-                               "(docs/decisions/0013-expose-for-the-part.md)",
-                               100 * done.clipped_share)
+        done = impl.rezero(model, images, self.loop_config(model),
+                           lambda: self.devices.camera.grab().image)
+        moved, report = done.model, done.report
         if heading_step_deg is not None:
-            estimator = SYSTEMS[system].estimator(dataclasses.replace(model, model=moved))
-            table = read_heading_zero(self, estimator, turns, frames, average)
-            moved = dataclasses.replace(moved, heading_zero=table)
+            estimator = impl.estimator(dataclasses.replace(model, model=moved))
+            table = read_heading_zero(self, estimator, turns, done.frames, done.average)
+            moved = impl.with_heading_zero(moved, table)
             report["heading_zero"] = table.to_info()
         model = dataclasses.replace(model, model=moved)
-        SYSTEMS[system].save(model, self.model_path(system))
+        impl.save(model, self.model_path(system))
         self._model = model
         logger.info("re-zeroed %s: %s", self.model_path(system), report)
         return model, report
@@ -435,20 +406,3 @@ def _same_pose(a: Pose, b: Pose, tol: float = 0.005) -> bool:
     0.01 mm and 0.01 deg to which VAL reports a pose."""
     return all(abs(getattr(a, f) - getattr(b, f)) <= tol
                for f in ("x_mm", "y_mm", "z_mm", "o_deg", "a_deg", "t_deg"))
-
-
-def _warn_if_too_noisy(loop: LoopConfig, scatter: tuple[float, float, float] | None) -> None:
-    """Warn where single frames at the taught pose scatter so much that a settling look's
-    ``settle_max_frames`` still leave its mean step beyond the loop's bounds
-    (``LoopConfig.settle_known``): the loop will end with that noise in its step."""
-    if scatter is None:
-        return
-    left = mean_scatter(scatter, loop.settle_max_frames)
-    if loop.settle_known(left):
-        return
-    logger.warning("rezero: single frames at the taught pose scatter by %.3f / %.3f mm and "
-                   "%.2f deg in this light; a settling look's %d frames still leave %.3f mm "
-                   "and %.2f deg in its mean step, above the recipe's loop.settle_sem_mm / "
-                   "settle_sem_deg: lower the camera's gain "
-                   "(docs/decisions/0013-expose-for-the-part.md)",
-                   *scatter, loop.settle_max_frames, max(left[0], left[1]), left[2])

@@ -87,7 +87,7 @@ from controller.evaluation.mounts import evaluate_mounts
 from controller.evaluation.parts_table import parts_markdown, run_parts_table
 from controller.evaluation.randomized import TRIALS_PER_CELL, evaluate_randomized
 from controller.evaluation.trials import evaluate
-from controller.fine_positioner import REZERO_SYSTEMS
+from controller.fine_positioner import HEADING_ZERO_SYSTEMS, REZERO_SYSTEMS
 from controller.loop.iteration_log import IterationLog
 from drivers.core import parts
 from drivers.core.errors import ConfigError
@@ -109,9 +109,10 @@ def run(args) -> int:
                           f"{args.system}")
     if args.rezero_heading_step is not None and not args.rezero:
         raise ConfigError("--rezero-heading-step: only with --rezero")
-    if args.rezero_heading_step is not None and args.system != "gabor":
-        raise ConfigError(f"--rezero-heading-step: only with --system gabor (the {args.system} "
-                          "system keeps one zero)")
+    if args.rezero_heading_step is not None and args.system not in HEADING_ZERO_SYSTEMS:
+        raise ConfigError(f"--rezero-heading-step: only with --system "
+                          f"{' or '.join(HEADING_ZERO_SYSTEMS)} (the {args.system} system "
+                          "keeps one zero)")
     if args.rezero and args.mounts is not None:
         raise ConfigError("--rezero: not with --mounts (each camera is trained on its own)")
     if args.teach_lighting and args.model:

@@ -14,9 +14,10 @@ from typing import Any
 import numpy as np
 
 from calibration_free.baselines.align.model import AlignModel, AlignPercept
+from calibration_free.baselines.align.rezero import rezero_align
 from calibration_free.baselines.align.train import train_align
 from calibration_free.dataset import Dataset
-from controller.systems.base import ModelEstimator, TrainedModel, VisionSystem
+from controller.systems.base import ModelEstimator, Rezeroed, TrainedModel, VisionSystem
 from controller.systems.estimator import RotationEstimate, TranslationEstimate, percept_of
 from controller.teach.cell_state import CellState
 
@@ -54,6 +55,14 @@ class AlignSystem(VisionSystem):
     suffix = ".align"
     model_cls = AlignModel
     estimator_cls = AlignEstimator
+    rezeroes = True
+
+    @classmethod
+    def rezero(cls, model: TrainedModel, images: list[np.ndarray], loop: Any,
+               grab: Any) -> Rezeroed:
+        """Take the servo's template again (``calibration_free.baselines.align.rezero``)."""
+        done = rezero_align(model.model, images)
+        return Rezeroed(done.model, done.report(), len(images), 1)
 
     @classmethod
     def train(cls, nn1: Dataset, nn2: Dataset, state: CellState,

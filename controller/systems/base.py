@@ -7,9 +7,12 @@ own file (``calibration_free.model_file``), and builds an Estimator
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any, ClassVar
+
+import numpy as np
 
 from calibration_free.dataset import Dataset
 from controller.teach.cell_state import CellState
@@ -34,6 +37,24 @@ class TrainedModel:
     feature_count: int
 
 
+@dataclass
+class Rezeroed:
+    """A model object re-zeroed at the taught pose (``VisionSystem.rezero``).
+
+    Attributes:
+        model: the model object with its new zero.
+        report: what moved (the system's own keys, e.g. ``shift_mm``, ``read_mm``).
+        frames: the frames the zero was read on (a zero by heading reads as many at each
+            heading).
+        average: the frames a mean is read on.
+    """
+
+    model: Any
+    report: dict[str, Any]
+    frames: int
+    average: int
+
+
 class ModelEstimator:
     """An Estimator that runs one trained model object, ``self.model``."""
 
@@ -49,13 +70,18 @@ class VisionSystem:
 
     Subclasses set ``name``, ``suffix`` (model file ending), ``model_cls`` (with ``save(path)``
     and ``load(path, expect_object=...)``) and ``estimator_cls`` (built on the model object),
-    and implement ``train``.
+    and implement ``train``. A system declares the calibrations it supports: ``rezeroes``
+    (``rezero``: a new zero read at the taught pose in the cell's light) and
+    ``zero_by_heading`` (the model keeps a zero for each heading of the tool,
+    ``controller.teach.heading_zero``).
     """
 
     name: ClassVar[str]
     suffix: ClassVar[str]
     model_cls: ClassVar[Any]
     estimator_cls: ClassVar[Any]
+    rezeroes: ClassVar[bool] = False
+    zero_by_heading: ClassVar[bool] = False
 
     @classmethod
     def train(cls, nn1: Dataset, nn2: Dataset, state: CellState,
@@ -72,6 +98,32 @@ class VisionSystem:
             TrainingError: the sets cannot train this system (see the system's trainer).
         """
         raise NotImplementedError
+
+    @classmethod
+    def rezero(cls, model: TrainedModel, images: list[np.ndarray], loop: Any,
+               grab: Callable[[], np.ndarray]) -> Rezeroed:
+        """Read the model's zero on ``images``, taken at the taught pose with the part where
+        it was taught (a system with ``rezeroes`` implements it).
+
+        Args:
+            loop: the loop's settings the model runs with (``LoopConfig``).
+            grab: takes one more frame there, where the system needs more.
+
+        Raises:
+            TrainingError: the part is not seen whole there, or not where it was taught.
+        """
+        raise NotImplementedError(f"the {cls.name} system does not re-zero")
+
+    @classmethod
+    def without_heading_zero(cls, model: Any) -> Any:
+        """The model object without its zero by heading (for a system with
+        ``zero_by_heading``)."""
+        return model
+
+    @classmethod
+    def with_heading_zero(cls, model: Any, table: Any) -> Any:
+        """The model object keeping ``table`` as its zero by heading."""
+        raise NotImplementedError(f"the {cls.name} system keeps one zero")
 
     @classmethod
     def save(cls, model: TrainedModel, path: str | Path) -> None:

@@ -3,7 +3,11 @@ look's translation from the rotation-aware net (the part's centre and NN2's rota
 
 from __future__ import annotations
 
+import dataclasses
+import logging
+import math
 import time
+from collections.abc import Callable
 from typing import Any
 
 import numpy as np
@@ -11,10 +15,19 @@ import numpy as np
 from calibration_free.bundle import ModelBundle
 from calibration_free.dataset import Dataset
 from calibration_free.perception import Percept, Perception
+from calibration_free.rezero import CLIPPED_WARN_SHARE, rezero
 from calibration_free.training import train_bundle
-from controller.systems.base import TrainedModel, VisionSystem
-from controller.systems.estimator import RotationEstimate, TranslationEstimate, percept_of
+from controller.loop.positioning import LoopConfig, mean_scatter, step_scatter
+from controller.systems.base import Rezeroed, TrainedModel, VisionSystem
+from controller.systems.estimator import (
+    RotationEstimate,
+    TranslationEstimate,
+    full_step,
+    percept_of,
+)
 from controller.teach.cell_state import CellState
+
+logger = logging.getLogger(__name__)
 
 
 class GaborEstimator:
@@ -93,6 +106,50 @@ class GaborSystem(VisionSystem):
     suffix = ".fpm"
     model_cls = ModelBundle
     estimator_cls = GaborEstimator
+    rezeroes = True
+    zero_by_heading = True
+
+    @classmethod
+    def rezero(cls, model: TrainedModel, images: list[np.ndarray], loop: LoopConfig,
+               grab: Callable[[], np.ndarray]) -> Rezeroed:
+        """Shift the translation nets to read zero on ``images`` (``calibration_free.rezero``),
+        read on the frames' means as the loop's settling look reads where ``settle_average``
+        is ``frames``: as many at a time as it reads where single frames scatter as these do
+        (``LoopConfig.settle_count``); where that asks for more frames than given, ``grab``
+        takes them (two whole means at least). The zero by heading is dropped (it belongs to
+        the old light). The report adds ``frame_scatter`` (standard deviations of single
+        frames' steps, mm, mm, deg) and ``heading_zero`` (null)."""
+        estimator = cls.estimator(model)
+        scatter = step_scatter([step for step in (full_step(estimator, image)
+                                                  for image in images) if step is not None])
+        images, average = list(images), 1
+        if loop.settle_average == "frames":
+            average = loop.settle_count(scatter)
+            if average > loop.settle_frames:  # the bounds ask for more: at least two
+                # means, and whole ones (a short last mean reads differently)
+                need = average * max(2, math.ceil(len(images) / average))
+                images += [grab() for _ in range(need - len(images))]
+        done = rezero(dataclasses.replace(model.model, heading_zero=None), images,
+                      average=average)
+        report = done.report()
+        report["frame_scatter"] = None if scatter is None else [round(v, 4) for v in scatter]
+        report["heading_zero"] = None
+        warn_if_too_noisy(loop, scatter)
+        if done.clipped_share > CLIPPED_WARN_SHARE:
+            logger.warning("rezero: the camera clips %.0f%% of the part's pixels at the "
+                           "taught pose in this light (a channel at 255): bring its "
+                           "exposure down until the part's brightest face is not white "
+                           "(docs/decisions/0013-expose-for-the-part.md)",
+                           100 * done.clipped_share)
+        return Rezeroed(done.bundle, report, len(images), average)
+
+    @classmethod
+    def without_heading_zero(cls, model: ModelBundle) -> ModelBundle:
+        return dataclasses.replace(model, heading_zero=None)
+
+    @classmethod
+    def with_heading_zero(cls, model: ModelBundle, table: Any) -> ModelBundle:
+        return dataclasses.replace(model, heading_zero=table)
 
     @classmethod
     def train(cls, nn1: Dataset, nn2: Dataset, state: CellState,
@@ -121,3 +178,20 @@ class GaborSystem(VisionSystem):
     def feature_count(model: ModelBundle) -> int:
         """The Gabor bank's filter count."""
         return model.gabor.n_filters
+
+
+def warn_if_too_noisy(loop: LoopConfig, scatter: tuple[float, float, float] | None) -> None:
+    """Warn where single frames at the taught pose scatter so much that a settling look's
+    ``settle_max_frames`` still leave its mean step beyond the loop's bounds
+    (``LoopConfig.settle_known``): the loop will end with that noise in its step."""
+    if scatter is None:
+        return
+    left = mean_scatter(scatter, loop.settle_max_frames)
+    if loop.settle_known(left):
+        return
+    logger.warning("rezero: single frames at the taught pose scatter by %.3f / %.3f mm and "
+                   "%.2f deg in this light; a settling look's %d frames still leave %.3f mm "
+                   "and %.2f deg in its mean step, above the recipe's loop.settle_sem_mm / "
+                   "settle_sem_deg: lower the camera's gain "
+                   "(docs/decisions/0013-expose-for-the-part.md)",
+                   *scatter, loop.settle_max_frames, max(left[0], left[1]), left[2])

@@ -8,6 +8,9 @@ from controller.systems.gabor import GaborSystem
 from controller.systems.hough import HoughSystem
 from controller.systems.pca import PcaSystem
 
+# The system the commands run unless told otherwise: finepos' own.
+DEFAULT_SYSTEM = "gabor"
+
 SYSTEMS: dict[str, type[VisionSystem]] = {
     "gabor": GaborSystem,
     "pca": PcaSystem,

@@ -198,11 +198,11 @@ def test_cli_rezero_moves_the_zero_to_the_new_light_and_refuses_a_moved_part(tra
 ])
 def test_rezero_warns_where_the_settling_look_cannot_average_the_noise_away(
         scatter, bounds, warned, caplog):
-    from controller.fine_positioner import _warn_if_too_noisy
     from controller.loop.positioning import LoopConfig
+    from controller.systems.gabor import warn_if_too_noisy
 
-    with caplog.at_level("WARNING", logger="controller.fine_positioner"):
-        _warn_if_too_noisy(LoopConfig(**bounds), scatter)
+    with caplog.at_level("WARNING", logger="controller.systems.gabor"):
+        warn_if_too_noisy(LoopConfig(**bounds), scatter)
     assert ("lower the camera's gain" in caplog.text) is warned
     if warned:
         assert len(caplog.records) == 1 and "16 frames" in caplog.text

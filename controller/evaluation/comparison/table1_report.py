@@ -19,6 +19,7 @@ from controller.evaluation.comparison.table1 import Table1Result
 from controller.evaluation.metrics import SAFE_DEG, SAFE_MM, is_safe, state_at
 from controller.evaluation.plots import plot_convergence
 from controller.loop.positioning import STOPPED
+from controller.systems.registry import DEFAULT_SYSTEM
 from drivers.core.files import atomic_write_text
 
 TABLE_BUDGETS = (1.5, 2.5, 5.0, 6.5)  # loops: every budget the paper's Table 1 quotes, <= 6.5
@@ -180,7 +181,7 @@ def verdict(result: Table1Result) -> list[str]:
     lines = []
     for (system, lighting), r in reports.items():
         gabor = reports.get(("gabor", lighting))
-        if system == "gabor" or gabor is None:
+        if system == DEFAULT_SYSTEM or gabor is None:
             continue
         g_pos, g_phi = _errors_at(result.states[("gabor", lighting)], VERDICT_BUDGET)
         b_pos, b_phi = _errors_at(result.states[(system, lighting)], VERDICT_BUDGET)
