@@ -447,6 +447,21 @@ class MonitorCondition:
 class WrenchSensor(Device):
     """A 6-axis wrist force-torque sensor."""
 
+    def read_mean(self, samples: int) -> Wrench:
+        """The mean of the sensor's last ``samples`` samples (biased), for a load at rest.
+        Controllers that average on their own (ATI ``SA n``) answer it with one query; this
+        default takes ``samples`` readings."""
+        self._require_connected()
+        if samples < 1:
+            raise ValueError(f"samples must be >= 1, got {samples}")
+        return self._read_mean(samples)
+
+    def _read_mean(self, samples: int) -> Wrench:
+        readings = [self._read() for _ in range(samples)]
+        return Wrench(*(sum(values) / samples
+                        for values in zip(*(r.as_dict().values() for r in readings),
+                                          strict=True)))
+
     def set_monitor_condition(self, condition: MonitorCondition | None) -> None:
         """Have the sensor switch its output while ``condition`` holds on its biased
         readings (None: clear it, the output stays low). Raises DeviceFaultError when the

@@ -144,6 +144,7 @@ class SimArm(Arm):
         if timing.clock.virtual:
             timing.motion(timing.config.arm.t0_s, "setup")
             timing.motion(seconds - timing.config.arm.t0_s)
+            timing.at_rest_s = timing.clock.now()
             return self.cell.arm_pose()
         self._animate(start, target, seconds, begin)
         reached = self.cell.arm_pose()
@@ -257,6 +258,7 @@ class SimArm(Arm):
             else:
                 timing.motion(t0, "setup")
                 timing.motion(elapsed - t0)
+            timing.at_rest_s = timing.clock.now()
         self._reached = cell.arm_pose()
         return self._reached, stopped_at is not None
 
@@ -327,6 +329,7 @@ class SimArm(Arm):
             else:  # the jaws' own simulation counts as hand time
                 timing.note(hand_s, "hand")
                 timing.clock.advance(begin + hand_s - timing.clock.now())
+            timing.at_rest_s = timing.clock.now()
         return width
 
     def _finger_width_mm(self) -> float:
@@ -426,6 +429,21 @@ class SimWrenchSensor(WrenchSensor):
             timing.wait((-timing.clock.now()) % period, "sensor")
             timing.wire(cell_timing.ATI_QR_BYTES, timing.config.ati_baud)
         return Wrench(*(float(v) for v in self.cell.wrench() - self._offset))
+
+    def _read_mean(self, samples: int) -> Wrench:
+        """As the ATI controller's moving average (``SA n``, one ``QR``, ``SA`` set back): the
+        mean of ``samples`` samples taken since the arm came to rest, waiting for the rest of
+        them only."""
+        timing = self.timing
+        if timing is not None:
+            period = 1.0 / timing.config.wrench_rate_hz
+            ready = timing.at_rest_s + samples * period
+            timing.wait(ready - timing.clock.now(), "sensor")
+            timing.wait((-timing.clock.now()) % period, "sensor")
+            timing.wire(2 * cell_timing.ATI_SA_BYTES + cell_timing.ATI_QR_BYTES,
+                        timing.config.ati_baud)
+        readings = [self.cell.wrench() - self._offset for _ in range(samples)]
+        return Wrench(*(float(v) for v in np.mean(readings, axis=0)))
 
     def _bias(self) -> None:
         self._offset = self.cell.wrench()

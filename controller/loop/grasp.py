@@ -154,9 +154,10 @@ def contact_condition(config: GraspConfig) -> MonitorCondition:
 
 
 def mean_force(sensor: WrenchSensor, samples: int) -> np.ndarray:
-    """The mean force vector (Fx, Fy, Fz; N, tool frame) of ``samples`` readings."""
-    readings = [sensor.read() for _ in range(samples)]
-    return np.mean([(r.fx_n, r.fy_n, r.fz_n) for r in readings], axis=0)
+    """The mean force vector (Fx, Fy, Fz; N, tool frame) of ``samples`` samples: the
+    sensor's own moving average where it keeps one (``WrenchSensor.read_mean``: one query)."""
+    mean = sensor.read_mean(samples)
+    return np.array([mean.fx_n, mean.fy_n, mean.fz_n])
 
 
 def guarded_grasp(arm: Arm, sensor: WrenchSensor, grasp_depth_mm: float,

@@ -19,9 +19,13 @@ sync_quiet_s: at start-up, stale bytes are drained until the line is quiet this 
     startup_commands: sent in order after the prompt was found, each answered by the prompt
     (``CD A`` ASCII output, ``CD R`` resolved forces; add e.g. ``SA 4`` for averaging);
     max_reply_bytes: a reply longer than this without a prompt is a protocol error;
+    average_command: sets the controller's moving average over the last ``samples`` samples
+    (``SA n``, confirmed); ``read_mean`` sends it, one ``QR``, and sets back the average of
+    the start-up commands (an ``SA n`` among them, else none);
     monitor_output: the discrete output the monitor condition switches (wired to the VAL
     input ``arm.program_input``); monitor_command: sets the condition (fields ``axis``
-    ``FX``..``TZ``, ``op`` ``<``/``>``, ``counts`` the threshold in counts, ``output``);
+    ``FX``..``TZ``, ``op`` ``LT``/``GT`` (``>`` is the prompt), ``counts`` the threshold in
+    counts, ``output``);
     monitor_clear: clears it. The controller evaluates monitor conditions itself (ATI manual
     9620-05-CTL); their serial syntax has no public source: these defaults are the emulator's.
     """
@@ -34,6 +38,7 @@ sync_quiet_s: at start-up, stale bytes are drained until the line is quiet this 
     sync_quiet_s: float = field(default=0.05, metadata=_POSITIVE)
     startup_commands: tuple[str, ...] = ("CD A", "CD R")
     max_reply_bytes: int = field(default=512, metadata={"min": 64})
+    average_command: str = "SA {samples}"
     monitor_output: int = field(default=1, metadata={"min": 1, "max": 16})
     monitor_command: str = "MC {axis} {op} {counts} {output}"
     monitor_clear: str = "MC"

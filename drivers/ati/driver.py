@@ -116,6 +116,27 @@ class AtiWrenchSensor(WrenchSensor):
                       c[2] / cfg.counts_per_force, c[3] / cfg.counts_per_torque,
                       c[4] / cfg.counts_per_torque, c[5] / cfg.counts_per_torque)
 
+    def _read_mean(self, samples: int) -> Wrench:
+        """The controller's own moving average of the last ``samples`` samples: set it, one
+        ``QR``, set back the start-up average."""
+        cfg = self.config
+        if samples == 1:
+            return self._read()
+        self._guarded(self._command, cfg.average_command.format(samples=samples))
+        try:
+            return self._read()
+        finally:
+            if self.is_connected:
+                self._guarded(self._command, cfg.average_command.format(
+                    samples=self._startup_average()))
+
+    def _startup_average(self) -> int:
+        for command in self.config.startup_commands:
+            words = command.split()
+            if len(words) == 2 and words[0].upper() == "SA" and words[1].isdigit():
+                return int(words[1])
+        return 0
+
     def _bias(self) -> None:
         self._guarded(self._command, "SB")
 
@@ -127,7 +148,7 @@ class AtiWrenchSensor(WrenchSensor):
             return
         scale = cfg.counts_per_force if condition.axis.endswith("_n") else cfg.counts_per_torque
         line = cfg.monitor_command.format(axis=condition.axis.split("_")[0].upper(),
-                                          op=condition.op,
+                                          op="GT" if condition.op == ">" else "LT",
                                           counts=round(condition.limit * scale),
                                           output=cfg.monitor_output)
         self._guarded(self._command, line)

@@ -60,6 +60,9 @@ def gripper_bytes(closed: bool) -> int:
 # moves), arm motion (profile and settling), hand, sensor sample waits, camera frame waits.
 BUDGET = ("wire", "setup", "motion", "hand", "sensor", "camera")
 
+# ATI: "SA n\r" and its echo, then the prompt (a set-up command of 5 characters).
+ATI_SA_BYTES = 5 + 1 + 5 + 2 + 1
+
 # ATI: "QR\r", its echo, then one ASCII record (status, six comma-separated 6-wide values,
 # CR LF) and the ">" prompt, as the ATI emulator writes them.
 ATI_QR_BYTES = 3 + 4 + (1 + 6 * 7) + 2 + 1
@@ -122,7 +125,8 @@ class CellTiming:
     False behind the emulators, whose lines pace the bytes themselves.
     wire_s / motion_s: seconds charged so far to the lines and to arm and hand motion (set-up,
     profile, settling, hand; ``finepos bench sim`` reports them); spent: the same seconds by
-    ``BUDGET`` kind, with the sensor's and the camera's waits; command_began_s: see
+    ``BUDGET`` kind, with the sensor's and the camera's waits; at_rest_s: when the arm and hand
+    last came to rest (the simulated devices set it); command_began_s: see
     ``begin_command``.
     """
 
@@ -133,6 +137,7 @@ class CellTiming:
     motion_s: float = field(default=0.0)
     command_began_s: float | None = None
     spent: dict[str, float] = field(default_factory=lambda: dict.fromkeys(BUDGET, 0.0))
+    at_rest_s: float = 0.0  # when the arm and hand last came to rest (cell clock)
 
     def begin_command(self) -> None:
         """Note that a command line has just arrived (the VAL emulator calls this): on a wall

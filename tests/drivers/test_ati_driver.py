@@ -191,3 +191,24 @@ def test_driver_meets_wrench_contract_on_the_simulated_wrist_sensor():
             noise = 0.2 if name.startswith("f") else 0.02  # sensor noise and count resolution
             assert value == pytest.approx(getattr(expected, name), abs=noise), name
         check_wrench(lambda: make_sensor(emu))
+
+
+def test_read_mean_is_one_query_under_the_controllers_own_average(emulator):
+    with make_sensor(emulator, startup_commands=("CD A", "CD R", "SA 2")) as sensor:
+        before = emulator.commands_received
+        assert_close(sensor.read_mean(16), LOAD)
+        assert emulator.commands_received - before == 3  # SA 16, QR, SA 2
+        assert emulator.controller.average_n == 2
+
+
+def test_the_monitor_condition_goes_to_the_controller_in_counts(emulator):
+    from drivers.interfaces import MonitorCondition
+
+    with make_sensor(emulator) as sensor:
+        sensor.set_monitor_condition(MonitorCondition("fz_n", "<", -3.0))
+        assert emulator.controller.conditions == {1: (2, "LT", -60)}
+        assert not emulator.controller.output_high(1)  # Fz +9.81 N
+        sensor.set_monitor_condition(MonitorCondition("fz_n", ">", 5.0))
+        assert emulator.controller.output_high(1)
+        sensor.set_monitor_condition(None)
+        assert emulator.controller.conditions == {}

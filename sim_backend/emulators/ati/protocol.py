@@ -124,8 +124,8 @@ class AtiController:
             self.conditions = {}
             return
         axes = ("FX", "FY", "FZ", "TX", "TY", "TZ")
-        if len(args) != 4 or args[0] not in axes or args[1] not in ("<", ">"):
-            raise ValueError("MC needs axis (FX..TZ), < or >, counts, output")
+        if len(args) != 4 or args[0] not in axes or args[1] not in ("LT", "GT"):
+            raise ValueError("MC needs axis (FX..TZ), LT or GT, counts, output")
         try:
             counts, output = int(args[2]), int(args[3])
         except ValueError:
@@ -148,7 +148,7 @@ class AtiController:
         if self.biases:
             raw = raw - self.biases[-1]
         value = int(raw[axis])
-        return value < counts if op == "<" else value > counts
+        return value < counts if op == "LT" else value > counts
 
     def _set_data_mode(self, args: list[str]) -> None:
         if len(args) != 1 or args[0] not in ("A", "B", "R", "D", "H"):

@@ -123,17 +123,18 @@ def test_command_serves_the_simulated_sensor_until_sigterm():
 # -- monitor conditions ----------------------------------------------------------------------
 def test_a_monitor_condition_drives_its_output_on_the_biased_reading(controller, backing):
     assert not controller.output_high(1)  # no condition: low
-    assert controller.execute("MC FZ > 50 1") == b"MC FZ > 50 1\r\n>"
+    assert controller.execute("MC FZ GT 50 1") == b"MC FZ GT 50 1\r\n>"
     assert controller.output_high(1)  # Fz 60 counts > 50
     assert not controller.output_high(2)
     controller.execute("SB")  # biased: Fz 0 counts
     assert not controller.output_high(1)
-    controller.execute("MC FX < 5 2")
+    controller.execute("MC FX LT 5 2")
     assert controller.output_high(2)
     controller.execute("MC")
     assert not controller.output_high(1) and not controller.output_high(2)
 
 
-@pytest.mark.parametrize("line", ["MC FZ 50 1", "MC QQ < 5 1", "MC FZ < x 1", "MC FZ < 5 9"])
+@pytest.mark.parametrize("line", ["MC FZ 50 1", "MC QQ LT 5 1", "MC FZ LT x 1", "MC FZ < 5 1",
+                                  "MC FZ LT 5 9"])
 def test_a_bad_monitor_condition_is_an_error_line(controller, line):
     assert b"Error:" in controller.execute(line)
