@@ -30,9 +30,9 @@ from controller.recipe import Recipe, recipe_of_model, with_recipe_stored
 from controller.systems.base import TrainedModel
 from controller.systems.registry import DEFAULT_SYSTEM, SYSTEMS
 from controller.teach.acquisition import acquire, grid_for, random_set, transfer
-from controller.teach.cell_state import CellState
 from controller.teach.heading_zero import default_range, headings, read_heading_zero
 from drivers.core import parts
+from drivers.core.cell_state import CellState
 from drivers.core.errors import FineposError
 from drivers.core.pose import Pose
 

@@ -19,7 +19,7 @@ from calibration_free.baselines.align.train import train_align
 from calibration_free.dataset import Dataset
 from controller.systems.base import ModelEstimator, Rezeroed, TrainedModel, VisionSystem
 from controller.systems.estimator import RotationEstimate, TranslationEstimate, percept_of
-from controller.teach.cell_state import CellState
+from drivers.core.cell_state import CellState
 
 
 class AlignEstimator(ModelEstimator):

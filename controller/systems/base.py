@@ -15,7 +15,7 @@ from typing import Any, ClassVar
 import numpy as np
 
 from calibration_free.dataset import Dataset
-from controller.teach.cell_state import CellState
+from drivers.core.cell_state import CellState
 
 
 @dataclass

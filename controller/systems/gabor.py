@@ -25,7 +25,7 @@ from controller.systems.estimator import (
     full_step,
     percept_of,
 )
-from controller.teach.cell_state import CellState
+from drivers.core.cell_state import CellState
 
 logger = logging.getLogger(__name__)
 

@@ -17,7 +17,7 @@ from calibration_free.baselines.hough.train import train_hough
 from calibration_free.dataset import Dataset
 from controller.systems.base import ModelEstimator, TrainedModel, VisionSystem
 from controller.systems.estimator import RotationEstimate, TranslationEstimate, percept_of
-from controller.teach.cell_state import CellState
+from drivers.core.cell_state import CellState
 
 
 class HoughEstimator(ModelEstimator):

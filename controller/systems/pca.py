@@ -16,7 +16,7 @@ from calibration_free.baselines.pca.train import train_pca
 from calibration_free.dataset import Dataset
 from controller.systems.base import ModelEstimator, TrainedModel, VisionSystem
 from controller.systems.estimator import RotationEstimate, TranslationEstimate, percept_of
-from controller.teach.cell_state import CellState
+from drivers.core.cell_state import CellState
 
 
 class PcaEstimator(ModelEstimator):

@@ -22,7 +22,7 @@ import logging
 import time
 from dataclasses import dataclass, field
 
-from controller.teach.cell_state import CellState
+from drivers.core.cell_state import CellState
 from drivers.core.errors import FineposError, MotionRejectedError
 from drivers.core.pose import Pose, ToolStep
 from drivers.spacenav import ButtonEvent, JogConfig, JogIntegrator, MotionEvent, SpacenavClient

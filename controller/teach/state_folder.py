@@ -18,8 +18,8 @@ from __future__ import annotations
 
 from pathlib import Path
 
-from controller.teach.cell_state import CellState, StateError
 from drivers.core import parts
+from drivers.core.cell_state import CellState, StateError
 from drivers.core.errors import ConfigError
 
 STATE_FILE = "cell.json"

@@ -44,7 +44,7 @@ from controller.loop.positioning import STOPPED
 from controller.systems.base import TrainedModel
 from controller.systems.gabor import GaborSystem
 from controller.teach.acquisition import acquire, transfer
-from controller.teach.cell_state import CellState
+from drivers.core.cell_state import CellState
 from drivers.core.errors import FineposError
 
 logger = logging.getLogger(__name__)

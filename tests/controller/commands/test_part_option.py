@@ -13,7 +13,7 @@ from calibration_free.dataset import Dataset
 from controller import cli
 from controller.commands.common import part_setup
 from controller.config import config_from_mapping, load_config
-from controller.teach.cell_state import CellState
+from drivers.core.cell_state import CellState
 from drivers.core.errors import ConfigError
 from drivers.core.pose import Pose
 

@@ -18,7 +18,7 @@ from controller.recording.channels import RecordingError
 from controller.recording.replay import read_looks, write_sheet, write_video
 from controller.recording.writer import RunRecorder
 from controller.systems.registry import SYSTEMS
-from controller.teach.cell_state import CellState
+from drivers.core.cell_state import CellState
 from drivers.core.pose import Pose, ToolStep
 from tests.controller.recording.test_writer import _run
 

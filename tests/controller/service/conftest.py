@@ -24,7 +24,7 @@ from controller.devices import CellDevices
 from controller.service.client import ServiceClient
 from controller.service.sd_notify import Notifier
 from controller.service.service import Service
-from controller.teach.cell_state import CellState
+from drivers.core.cell_state import CellState
 from drivers.core.pose import Pose
 from sim_backend.emulators.val.server import ValEmulator
 from tests.mocks.fakes import FakeArm

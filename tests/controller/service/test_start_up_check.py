@@ -10,7 +10,7 @@ import pytest
 
 from calibration_free.training import train_bundle
 from controller.service.client import ServiceError
-from controller.teach.cell_state import CellState
+from drivers.core.cell_state import CellState
 from tests.mocks.fakes import FakeArm, FakeCamera, FakeWrenchSensor
 from tests.synthetic_scene import KAPPA, cell, grids  # noqa: F401  (fixtures)
 

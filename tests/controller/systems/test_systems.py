@@ -13,7 +13,7 @@ from calibration_free.synthetic import render
 from controller.recipe import PerceptionConfig
 from controller.systems.estimator import RotationEstimate, TranslationEstimate
 from controller.systems.registry import SYSTEMS
-from controller.teach.cell_state import CellState
+from drivers.core.cell_state import CellState
 from drivers.core.pose import Pose
 from tests.synthetic_scene import KAPPA, NOMINAL_POSE, wrapped_error_deg
 

@@ -56,7 +56,7 @@ def test_cli_check_without_teach_in_is_an_error(tmp_path, capsys):
 
 # -- what it reads, it reads whole (issue 51, defect 7) ------------------------------------------
 def _taught_folder(folder):
-    from controller.teach.cell_state import CellState
+    from drivers.core.cell_state import CellState
     from drivers.core.pose import Pose
 
     CellState(Pose(300.0, 0.0, 150.0, -90.0, 90.0, 0.0), "cube", 4, 20.0, 30.0, "auto",
@@ -101,7 +101,7 @@ class _Stub:
     """What self_check asks of a FinePositioner, failing the test if the arm is moved."""
 
     def __init__(self, folder) -> None:
-        from controller.teach.cell_state import CellState
+        from drivers.core.cell_state import CellState
 
         self.folder = folder
         self._state = CellState.load(folder / "cell.json")

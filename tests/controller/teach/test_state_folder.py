@@ -5,8 +5,8 @@ from __future__ import annotations
 
 import pytest
 
-from controller.teach.cell_state import CellState
 from controller.teach.state_folder import StateFolder, check_part
+from drivers.core.cell_state import CellState
 from drivers.core.errors import ConfigError
 from drivers.core.pose import Pose
 

@@ -20,8 +20,8 @@ from controller.cli import main
 from controller.config import load_config
 from controller.devices import open_devices
 from controller.fine_positioner import FinePositioner
-from controller.teach.cell_state import CellState
 from controller.teach.spacenav import TeachAborted, displaced, jog_and_record
+from drivers.core.cell_state import CellState
 from drivers.core.pose import Pose
 from drivers.spacenav import SpacenavClient
 from sim_backend.emulators.magellan.script import Motion, click

@@ -8,7 +8,7 @@ import os
 
 import pytest
 
-from controller.teach.cell_state import CellState, StateError
+from drivers.core.cell_state import CellState, StateError
 from drivers.core.pose import Pose
 
 GOOD = CellState(Pose(300.0, 0.0, 150.0, -90.0, 90.0, 0.0), "cube", 4, 5.0, 30.0, "test", 1.0)
