@@ -30,7 +30,7 @@ from controller.evaluation.comparison.pools import Tick, open_pool
 from controller.evaluation.metrics import is_safe, loops_to_safe, state_at, wilson
 from controller.evaluation.mounts import random_camera
 from controller.evaluation.trials import run_trials, train_systems_on_cell
-from controller.loop.positioning import STOPPED
+from controller.loop.checks import STOPPED
 from controller.systems.registry import SYSTEMS
 from drivers.core.errors import FineposError
 from sim_backend.cell.lighting import kelvin_rgb

@@ -14,7 +14,8 @@ the rotation reading no longer follows the arm, so the next step cannot be trust
 look before the first full loop that finds no part, or little of it (something lies over the
 end nearer the camera, which looks at the part from an angle), moves over the part where it
 was found and turns the camera to the other side of it, and looks again
-(``look_around_deg``).
+(``look_around_deg``). Each such check is one object in ``controller.loop.checks``, with
+``Outcome``, how a run ends.
 """
 
 from __future__ import annotations
@@ -32,7 +33,12 @@ from typing import Any, Literal, Protocol
 import cv2
 import numpy as np
 
-from calibration_free.preprocess import mean_frame
+from controller.loop.checks import (
+    LoopChecks,
+    Outcome,
+    Stop,
+    mean_scatter,
+)
 from controller.loop.iteration_log import IterationLog
 from controller.loop.record import IterationRecord, LoopKind
 from controller.systems.estimator import (
@@ -49,12 +55,6 @@ from drivers.safety import split_step
 logger = logging.getLogger(__name__)
 
 GroundTruth = Callable[[], tuple[float, float, float]]
-Outcome = Literal["converged", "budget", "no_object", "ambiguous", "out_of_range",
-                  "inconsistent", "occluded", "rejected"]
-# Outcomes that end a run early, before convergence or the loop budget: the arm is left where
-# the last accepted move put it.
-STOPPED: tuple[Outcome, ...] = ("no_object", "ambiguous", "out_of_range", "inconsistent",
-                                "occluded", "rejected")
 # A converged look's step smaller than both is not made (``LoopConfig.final_step``): finer
 # than the arm resolves (VAL takes a pose to 0.01 mm and 0.001 deg).
 FINAL_STEP_MIN_MM = 1e-3
@@ -236,30 +236,6 @@ class PositioningResult:
         self.reason = self.reason.replace(CARRIED, ", not made (the arm moved before the grasp)")
 
 
-def step_scatter(steps: list[ToolStep]) -> tuple[float, float, float] | None:
-    """The sample standard deviation of ``steps`` in x, y (mm) and the turn (deg); None
-    below two."""
-    if len(steps) < 2:
-        return None
-    values = np.array([(s.dx_mm, s.dy_mm, s.dphi_deg) for s in steps])
-    sd = values.std(axis=0, ddof=1)
-    return float(sd[0]), float(sd[1]), float(sd[2])
-
-
-def _standard_errors(steps: list[ToolStep]) -> tuple[float, float, float] | None:
-    """The standard error of the mean of ``steps`` in x, y (mm) and the turn (deg): each
-    axis' sample standard deviation over the root of their number; None below two."""
-    sd = step_scatter(steps)
-    return None if sd is None else mean_scatter(sd, len(steps))
-
-
-def mean_scatter(scatter: tuple[float, float, float], n: int) -> tuple[float, float, float]:
-    """The standard errors (x, y mm, the turn deg) of a mean of ``n`` frames' steps whose
-    single frames scatter by ``scatter`` (standard deviations)."""
-    root = math.sqrt(n)
-    return scatter[0] / root, scatter[1] / root, scatter[2] / root
-
-
 def _less(step: ToolStep, zero: ToolStep | None) -> ToolStep:
     """``step`` with a zero (the step read at the taught pose at the tool's heading) taken
     off."""
@@ -280,6 +256,47 @@ def _turn_within_limits(step: ToolStep, arm: Arm) -> ToolStep:
     logger.debug("turn of %.1f deg taken in part (max_step_deg %g)", step.dphi_deg,
                  limits.max_step_deg)
     return dataclasses.replace(step, dphi_deg=math.copysign(limits.max_step_deg, step.dphi_deg))
+
+
+@dataclass
+class _Look:
+    """One look: the frame, the translation read, its record and its clock (start, grabbed[,
+    perceived])."""
+
+    frame: Frame
+    tr: TranslationEstimate
+    record: IterationRecord
+    clock: tuple[float, ...]
+
+
+@dataclass
+class _Run:
+    """What a run has spent so far."""
+
+    run_id: str
+    budget: float
+    states: list[LoopState]
+    loops: float = 0.0
+    iteration: int = 0
+    per_iteration: list[float] = field(default_factory=list)
+
+    def affords(self, cost: float) -> bool:
+        """Whether the budget has ``cost`` loops left."""
+        return self.loops + cost <= self.budget + 1e-9
+
+    def moved(self, cost: float, error: tuple[float, float, float] | None,
+              seconds: float) -> None:
+        self.loops += cost
+        self.iteration += 1
+        self.states.append(LoopState(self.loops, error))
+        self.per_iteration.append(seconds)
+
+    def finish(self, outcome: Outcome, reason: str,
+               carried: ToolStep | None = None) -> PositioningResult:
+        logger.debug("positioning %s: %s after %.1f loops (%s)", self.run_id, outcome,
+                     self.loops, reason)
+        return PositioningResult(self.run_id, outcome, reason, self.loops, self.iteration,
+                                 self.states, self.per_iteration, carried)
 
 
 class PositioningLoop:
@@ -325,140 +342,131 @@ class PositioningLoop:
             PositioningResult). A lost part, a rejected step and an abort end the run
             without an exception.
         """
-        cfg = self.config
-        budget = cfg.max_loops if max_loops is None else max_loops
-        run_id = run_id or uuid.uuid4().hex[:12]
         self._abort = False
-        loops, iteration = 0.0, 0
-        states = [LoopState(0.0, self._error())]
-        per_iteration: list[float] = []
-        # the turn the next full look should read (the last full loop's reading less the
-        # turn taken) and how far off it may be; None before the first full loop
-        expected: tuple[float, float] | None = None
-        full_made = looked_around = False  # a full loop made; the look-around made
-
-        def move(record: IterationRecord, kind: LoopKind, cost: float,
-                 clock: tuple[float, ...], image) -> PositioningResult | None:
-            """Make the look's move and count it; the result where the arm refused it."""
-            nonlocal loops, iteration
-            outcome = self._move(record, kind, cost, clock, image)
-            if isinstance(outcome, str):
-                return finish("rejected", outcome)
-            loops += cost
-            iteration += 1
-            states.append(LoopState(loops, record.error))
-            per_iteration.append(outcome)
-            return None
-
-        def finish(outcome: Outcome, reason: str,
-                   carried: ToolStep | None = None) -> PositioningResult:
-            logger.debug("positioning %s: %s after %.1f loops (%s)", run_id, outcome, loops,
-                         reason)
-            return PositioningResult(run_id, outcome, reason, loops, iteration, states,
-                                     per_iteration, carried)
-
+        run = _Run(run_id or uuid.uuid4().hex[:12],
+                   self.config.max_loops if max_loops is None else max_loops,
+                   [LoopState(0.0, self._error())])
+        checks = LoopChecks.for_run(self.config, self.reach_mm)
         while True:
             if self._abort:
-                return finish("rejected", "aborted")
-            t0 = time.perf_counter()
-            frame = self.camera.grab()
-            t1 = time.perf_counter()
-            tr = estimator.estimate_translation(frame.image)
-            self._look = (frame, tr, estimator, states[-1].error)
-            record = IterationRecord(time.time(), run_id, estimator.name, iteration + 1,
-                                     tr.u_px, tr.v_px, tr.status, dict(tr.record),
-                                     loops=loops, error=states[-1].error)
-            if tr.status != "ok":
-                record.estimates["reason"] = tr.reason  # why the part was not found
-            if not full_made and not looked_around and self._look_around_wanted(tr) \
-                    and loops + 1.0 <= budget + 1e-9:
-                looked_around = True
-                # where the part was found within reach the tool first moves over it (a half
-                # loop's step), so the turn does not swing the camera round a far part
-                found = tr.status == "ok" and not self._beyond_reach(tr)
-                shift = (tr.dx_mm, tr.dy_mm) if found else (0.0, 0.0)
-                seen = "the part not found" if tr.status != "ok" else \
-                    f"{tr.seen_share:.0%} of the part seen"
-                how = f"moving by the {math.hypot(*shift):.1f} mm read and turning" if found \
-                    else "turning"
-                record.estimates["look_around"] = \
-                    f"{seen}: {how} the tool by {cfg.look_around_deg:g} deg to look from " \
-                    "another side"
-                record.commanded = ToolStep(*shift, 0.0, cfg.look_around_deg)
-                refused = move(record, "around", 1.0, (t0, t1), frame.image)
+                return run.finish(Outcome.REJECTED, "aborted")
+            look = self._look_once(estimator, run)
+            around = checks.look_around.step(look.tr, checks.reach, look.record,
+                                             affordable=run.affords(1.0))
+            if around is not None:
+                look.record.commanded = around
+                refused = self._make(run, look, "around", 1.0)
                 if refused is not None:
                     return refused
                 continue
-            if tr.status != "ok":
-                self._write(record, "stop", (t0, t1, time.perf_counter()), frame.image)
-                return finish(tr.status, tr.reason or tr.status)
-            read_mm = math.hypot(tr.dx_mm, tr.dy_mm)
-            if self._beyond_reach(tr):
-                self._write(record, "stop", (t0, t1, time.perf_counter()), frame.image)
-                return finish("out_of_range", f"the correction read, {read_mm:.1f} mm, is "
-                                              f"beyond the training range ({self.reach_mm:.1f}"
-                                              " mm): not the taught part, or not where it "
-                                              "was taught")
-            if math.hypot(tr.dx_mm, tr.dy_mm) > cfg.r_fine_mm:
-                kind, cost = "half", 0.5
-                step = corrective_step(tr)
-            else:
-                kind, cost = "full", 1.0
-                rot = estimator.estimate_rotation(tr)
-                record.estimates.update(rot.record)
-                zero = self._heading_zero(estimator, record)
-                read = _less(corrective_step(tr, rot), zero)
-                if expected is not None:
-                    record.estimates["turn_expected_deg"] = expected[0]
-                    if abs(read.dphi_deg - expected[0]) > expected[1]:
-                        record.commanded = read
-                        self._write(record, "stop", (t0, t1, time.perf_counter()),
-                                    frame.image)
-                        return finish("inconsistent", f"the turn read, {read.dphi_deg:.1f} "
-                                      f"deg, contradicts the last loop's (about "
-                                      f"{expected[0]:.1f} deg expected): the rotation "
-                                      "reading does not follow the arm")
-                if cfg.settle_frames > 1 and self._settling(read):
-                    read = self._settle(estimator, read, record, frame.image, zero)
-                step = read if cfg.turn_in_commands else _turn_within_limits(read, self.arm)
-            record.commanded = step
-            shift = math.hypot(step.dx_mm, step.dy_mm)
-            t2 = time.perf_counter()
-            converged = kind == "full" and shift <= cfg.converge_mm and \
-                abs(step.dphi_deg) <= cfg.converge_deg
-            spent = not converged and loops + cost > budget + 1e-9
-            if (converged or spent) and self._hidden(tr, read_mm):
-                self._write(record, "stop", (t0, t1, t2), frame.image)
-                return finish("occluded", f"the part shows {tr.seen_share:.0%} of its area at "
-                                          "the taught pose: something hides part of it, so "
-                                          "the pose read from what is seen is off")
-            if converged:
-                reason = f"step {shift:.3f} mm / {step.dphi_deg:.2f} deg below the " \
-                         "convergence thresholds"
-                if cfg.final_step and loops + cost <= budget + 1e-9 \
-                        and (shift >= FINAL_STEP_MIN_MM
-                             or abs(step.dphi_deg) >= FINAL_STEP_MIN_DEG):
-                    if carry_final_step:
-                        record.estimates["final_step"] = "carried"
-                        self._write(record, "check", (t0, t1, t2), frame.image)
-                        return finish("converged", reason + CARRIED, step)
-                    refused = move(record, "check", cost, (t0, t1, t2), frame.image)
-                    if refused is not None:
-                        return refused
-                    return finish("converged", reason + ", and made")
-                self._write(record, "check", (t0, t1, t2), frame.image)
-                return finish("converged", reason)
-            if spent:
-                self._write(record, "stop", (t0, t1, t2), frame.image)
-                return finish("budget", f"loop budget {budget:g} spent")
-            refused = move(record, kind, cost, (t0, t1, t2), frame.image)
+            if look.tr.status != "ok":
+                return self._stop(run, look, Stop(Outcome(look.tr.status),
+                                                  look.tr.reason or look.tr.status))
+            stop = checks.reach.check(look.tr)
+            if stop is not None:
+                return self._stop(run, look, stop)
+            kind, cost, read = self._read_step(estimator, look, checks)
+            if isinstance(read, Stop):
+                return self._stop(run, look, read)
+            step = read if kind == "half" or self.config.turn_in_commands else \
+                _turn_within_limits(read, self.arm)
+            look.record.commanded = step
+            ended = self._end(run, look, kind, cost, step, checks, carry_final_step)
+            if ended is not None:
+                return ended
+            refused = self._make(run, look, kind, cost)
             if refused is not None:
                 return refused
-            full_made = full_made or kind == "full"
-            if kind == "full" and cfg.turn_check_deg is not None:
-                turned = record.executed.dphi_deg
-                expected = (read.dphi_deg - turned,
-                            max(cfg.turn_check_deg, cfg.turn_check_share * abs(turned)))
+            if kind == "full":
+                checks.look_around.full_made = True
+                checks.turn.turned(read, look.record.executed)
+
+    def _look_once(self, estimator: Estimator, run: _Run) -> _Look:
+        """Grab a frame and read the translation; the look's record."""
+        t0 = time.perf_counter()
+        frame = self.camera.grab()
+        t1 = time.perf_counter()
+        tr = estimator.estimate_translation(frame.image)
+        error = run.states[-1].error
+        self._look = (frame, tr, estimator, error)
+        record = IterationRecord(time.time(), run.run_id, estimator.name, run.iteration + 1,
+                                 tr.u_px, tr.v_px, tr.status, dict(tr.record),
+                                 loops=run.loops, error=error)
+        if tr.status != "ok":
+            record.estimates["reason"] = tr.reason  # why the part was not found
+        return _Look(frame, tr, record, (t0, t1))
+
+    def _read_step(self, estimator: Estimator, look: _Look, checks: LoopChecks
+                   ) -> tuple[LoopKind, float, ToolStep | Stop]:
+        """The look's kind, cost and step: a half loop's translation while far, else a full
+        loop's step (the rotation read, the zero at the tool's heading taken off, the turn
+        checked, and settled near the pose); a ``Stop`` where the turn check fails (the step
+        read is then the record's ``commanded``)."""
+        tr = look.tr
+        if math.hypot(tr.dx_mm, tr.dy_mm) > self.config.r_fine_mm:
+            return "half", 0.5, corrective_step(tr)
+        rot = estimator.estimate_rotation(tr)
+        look.record.estimates.update(rot.record)
+        zero = self._heading_zero(estimator, look.record)
+        read = _less(corrective_step(tr, rot), zero)
+        stop = checks.turn.check(read, look.record)
+        if stop is not None:
+            look.record.commanded = read
+            return "full", 1.0, stop
+        if checks.settling.wanted(read):
+            read = checks.settling.read(
+                read, look.frame.image, look.record, lambda: self.camera.grab().image,
+                lambda image: self._full_step(estimator, image, zero))
+        return "full", 1.0, read
+
+    def _end(self, run: _Run, look: _Look, kind: LoopKind, cost: float, step: ToolStep,
+             checks: LoopChecks, carry_final_step: bool) -> PositioningResult | None:
+        """The result where this look ends the run (converged, the budget spent, or the part
+        partly hidden there), else None. A converged look still makes its step
+        (``final_step``), or leaves it to the grasp (``carry_final_step``)."""
+        cfg, tr = self.config, look.tr
+        shift = math.hypot(step.dx_mm, step.dy_mm)
+        look.clock = (*look.clock[:2], time.perf_counter())
+        converged = kind == "full" and shift <= cfg.converge_mm and \
+            abs(step.dphi_deg) <= cfg.converge_deg
+        spent = not converged and not run.affords(cost)
+        if converged or spent:
+            hidden = checks.hidden.check(tr, math.hypot(tr.dx_mm, tr.dy_mm))
+            if hidden is not None:
+                return self._stop(run, look, hidden)
+        if spent:
+            return self._stop(run, look, Stop(Outcome.BUDGET,
+                                              f"loop budget {run.budget:g} spent"))
+        if not converged:
+            return None
+        reason = f"step {shift:.3f} mm / {step.dphi_deg:.2f} deg below the convergence " \
+                 "thresholds"
+        if cfg.final_step and run.affords(cost) and \
+                (shift >= FINAL_STEP_MIN_MM or abs(step.dphi_deg) >= FINAL_STEP_MIN_DEG):
+            if carry_final_step:
+                look.record.estimates["final_step"] = "carried"
+                self._write(look.record, "check", look.clock, look.frame.image)
+                return run.finish(Outcome.CONVERGED, reason + CARRIED, step)
+            refused = self._make(run, look, "check", cost)
+            return refused if refused is not None else \
+                run.finish(Outcome.CONVERGED, reason + ", and made")
+        self._write(look.record, "check", look.clock, look.frame.image)
+        return run.finish(Outcome.CONVERGED, reason)
+
+    def _stop(self, run: _Run, look: _Look, stop: Stop) -> PositioningResult:
+        """End the run at this look without a move, logged as a stop."""
+        clock = look.clock if len(look.clock) > 2 else (*look.clock, time.perf_counter())
+        self._write(look.record, "stop", clock, look.frame.image)
+        return run.finish(stop.outcome, stop.reason)
+
+    def _make(self, run: _Run, look: _Look, kind: LoopKind,
+              cost: float) -> PositioningResult | None:
+        """Make the look's move and count it; the result where the arm refused it."""
+        outcome = self._move(look.record, kind, cost, look.clock, look.frame.image)
+        if isinstance(outcome, str):
+            return run.finish(Outcome.REJECTED, outcome)
+        run.moved(cost, look.record.error, outcome)
+        return None
 
     def _move(self, record: IterationRecord, kind: LoopKind, cost: float,
               clock: tuple[float, ...], image) -> float | str:
@@ -490,70 +498,6 @@ class PositioningLoop:
         self._write(record, kind, (*clock[:2], t2, t3), image)
         return t3 - clock[0]
 
-    def _beyond_reach(self, tr: TranslationEstimate) -> bool:
-        """Whether an ``ok`` look's translation lies beyond ``reach_factor`` times the training
-        range (never where the range is not known)."""
-        return self.reach_mm is not None and \
-            math.hypot(tr.dx_mm, tr.dy_mm) > self.config.reach_factor * self.reach_mm
-
-    def _look_around_wanted(self, tr: TranslationEstimate) -> bool:
-        """Whether a look calls for the look-around: no part found, or the part seen at less
-        than ``look_around_below`` of its area at the taught pose."""
-        cfg = self.config
-        if not cfg.look_around_deg:
-            return False
-        if tr.status != "ok":
-            return tr.status == "no_object"
-        return cfg.look_around_below is not None and tr.seen_share is not None \
-            and tr.seen_share < cfg.look_around_below
-
-    def _hidden(self, tr: TranslationEstimate, read_mm: float) -> bool:
-        """Whether a look where the loop ends shows the part partly hidden: near the taught
-        pose (the translation read within r_fine) its blob is smaller than there by more
-        than ``hidden_check_share``."""
-        share = self.config.hidden_check_share
-        return share is not None and tr.seen_share is not None \
-            and read_mm <= self.config.r_fine_mm and tr.seen_share < 1.0 - share
-
-    def _settle(self, estimator: Estimator, first: ToolStep, record: IterationRecord,
-                image: np.ndarray, zero: ToolStep | None) -> ToolStep:
-        """One step from ``first`` (read on ``image``) and ``settle_frames - 1`` more frames,
-        and more while their mean step is not known to ``settle_sem_mm`` / ``settle_sem_deg``
-        (``settle_max_frames`` in all; ``settle_average``). A frame where the part is not
-        found, or whose step is outside the settle window (``settle_mm``, ``settle_deg``; a
-        misreading), is left out. The record keeps every frame's step (``settle``, the first
-        one first; null where not found), the standard error of their mean step
-        (``settle_sem``: mm, mm, deg; null below two frames) and the mean frame's step
-        (``settle_mean_frame``). Where the mean frame reads no part or a step outside the
-        window, the frames' mean step is taken. Every frame's step has the look's ``zero``
-        (``_heading_zero``) taken off."""
-        cfg = self.config
-        steps, images = [first], [image]
-        read = [[first.dx_mm, first.dy_mm, first.dphi_deg]]
-        while len(read) < cfg.settle_frames or (
-                len(read) < cfg.settle_max_frames and not self._known(steps)):
-            image = self.camera.grab().image
-            step = self._full_step(estimator, image, zero)
-            if step is None:
-                read.append(None)
-                continue
-            read.append([step.dx_mm, step.dy_mm, step.dphi_deg])
-            if self._settling(step):
-                steps.append(step)
-                images.append(image)
-        record.estimates["settle"] = read
-        sem = _standard_errors(steps)
-        record.estimates["settle_sem"] = None if sem is None else list(sem)
-        if cfg.settle_average == "frames" and len(images) > 1:
-            step = self._full_step(estimator, mean_frame(images), zero)
-            record.estimates["settle_mean_frame"] = None if step is None else \
-                [step.dx_mm, step.dy_mm, step.dphi_deg]
-            if step is not None and self._settling(step):
-                return ToolStep(step.dx_mm, step.dy_mm, 0.0, step.dphi_deg)
-        n = len(steps)
-        return ToolStep(sum(s.dx_mm for s in steps) / n, sum(s.dy_mm for s in steps) / n, 0.0,
-                        sum(s.dphi_deg for s in steps) / n)
-
     @staticmethod
     def _full_step(estimator: Estimator, image: np.ndarray,
                    zero: ToolStep | None) -> ToolStep | None:
@@ -579,16 +523,6 @@ class PositioningLoop:
             return None
         dx, dy = shift or (0.0, 0.0)
         return ToolStep(dx, dy, 0.0, turn)
-
-    def _known(self, steps: list[ToolStep]) -> bool:
-        """Whether the mean of ``steps`` is known to the settle bounds
-        (``LoopConfig.settle_known``)."""
-        return self.config.settle_known(_standard_errors(steps))
-
-    def _settling(self, step: ToolStep) -> bool:
-        cfg = self.config
-        return math.hypot(step.dx_mm, step.dy_mm) <= cfg.settle_mm and \
-            abs(step.dphi_deg) <= cfg.settle_deg
 
     def _write(self, record: IterationRecord, kind: LoopKind, clock: tuple[float, ...],
                image) -> None:

@@ -17,7 +17,8 @@ from calibration_free.dataset import Dataset
 from calibration_free.perception import Percept, Perception
 from calibration_free.rezero import CLIPPED_WARN_SHARE, rezero
 from calibration_free.training import train_bundle
-from controller.loop.positioning import LoopConfig, mean_scatter, step_scatter
+from controller.loop.checks import mean_scatter, step_scatter
+from controller.loop.positioning import LoopConfig
 from controller.systems.base import Rezeroed, TrainedModel, VisionSystem
 from controller.systems.estimator import (
     RotationEstimate,

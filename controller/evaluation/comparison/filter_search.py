@@ -40,7 +40,7 @@ from controller.evaluation.comparison.pools import Tick, open_pool
 from controller.evaluation.metrics import is_safe, state_at
 from controller.evaluation.trials import default_scene_config, run_trials
 from controller.fine_positioner import FinePositioner
-from controller.loop.positioning import STOPPED
+from controller.loop.checks import STOPPED
 from controller.systems.base import TrainedModel
 from controller.systems.gabor import GaborSystem
 from controller.teach.acquisition import acquire, transfer

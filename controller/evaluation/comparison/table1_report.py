@@ -18,7 +18,7 @@ import numpy as np
 from controller.evaluation.comparison.table1 import Table1Result
 from controller.evaluation.metrics import SAFE_DEG, SAFE_MM, is_safe, state_at
 from controller.evaluation.plots import plot_convergence
-from controller.loop.positioning import STOPPED
+from controller.loop.checks import STOPPED
 from controller.systems.registry import DEFAULT_SYSTEM
 from drivers.core.files import atomic_write_text
 
