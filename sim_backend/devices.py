@@ -149,6 +149,7 @@ class SimArm(Arm):
         self._animate(start, target, seconds, begin)
         reached = self.cell.arm_pose()
         timing.clock.advance(begin + seconds - timing.clock.now())  # the end of the settling
+        timing.at_rest_s = timing.clock.now()
         # As the VAL driver by default (arm.where_after_move: false): no read-back exchange.
         return reached
 

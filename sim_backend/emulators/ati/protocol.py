@@ -12,7 +12,9 @@ and the prompt ``>``):
 - ``QR``: one record. ``QS``: a stream of records until the client sends ``\\r``.
 - ``SB`` bias (pushes the current load; at most 3 kept), ``SU`` drops the last bias, ``SZ``
   clears all.
-- ``SA n``: each record is the mean of n consecutive sensor readings (0 or 1: no averaging).
+- ``SA n``: each record is the moving average of the last n samples (0 or 1: no averaging):
+  the backing sensor's ``read_mean(n)`` (the simulated one waits only for the samples not yet
+  taken since the arm came to rest).
 - ``CL 0|1``: lines end ``\\r`` / ``\\r\\n``. ``CV h``: hex mask of the components sent.
 
 Where the wire format is not confirmed by the hardware notes this emulator chooses one and says
@@ -179,8 +181,11 @@ class AtiController:
         """Current load in counts (the mean of ``samples`` readings, by default
         ``average_n``), unbiased."""
         n = max(1, self.average_n if samples is None else samples)
-        readings = [list(self.sensor.read().as_dict().values()) for _ in range(n)]
-        return np.rint(np.mean(readings, axis=0) * self.scale).astype(np.int64)
+        if n == 1:
+            mean = list(self.sensor.read().as_dict().values())
+        else:  # the moving average of the samples the controller has been taking
+            mean = list(self.sensor.read_mean(n).as_dict().values())
+        return np.rint(np.array(mean) * self.scale).astype(np.int64)
 
 
 def _one_int(args: list[str], base: int) -> int:
