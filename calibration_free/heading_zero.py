@@ -12,7 +12,7 @@ heading (``calibration_free.rezero``) removes the offset there and leaves the re
 taught pose, turn it and set it down at each heading of a range, go back up to the taught
 pose over it and read the step there as the loop reads it (NN2's turn, or a long part's axis
 map's where it takes over near the pose): that reading is the zero at that tool heading
-(``controller.teach.heading_zero``). The positioning loop takes the table's value at the
+(``controller.calibration.heading_zero``). The positioning loop takes the table's value at the
 tool's heading off every full look's step.
 
 The translation nets' reading moves with the heading too (0.04 mm RMS for the cube, up to
@@ -24,7 +24,7 @@ by a quarter turn after each set-down, which centres it along the jaws as well, 
 keeps the translation read at each heading against the plain zero (``dx_mm``, ``dy_mm``); the
 other parts the arm turns back to the taught heading after each heading and looks there too,
 and each heading's reading is kept less the mean of the looks there either side of it
-(``controller.teach.heading_zero``). Tables written before keep the turn only for those.
+(``controller.calibration.heading_zero``). Tables written before keep the turn only for those.
 
 Headings are the tool's turn about the vertical in the world (``Pose.approach_rotation_deg``),
 as the arm reports it; the table holds them unwrapped (increasing, less than a turn apart). At a

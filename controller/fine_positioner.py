@@ -18,6 +18,7 @@ from pathlib import Path
 import numpy as np
 
 from calibration_free.dataset import Dataset
+from controller.calibration.rezero import REZERO_FRAMES, rezero
 from controller.config import recipe_of
 from controller.loop.grasp import GraspResult, guarded_grasp
 from controller.loop.iteration_log import IterationLog
@@ -30,24 +31,12 @@ from controller.recipe import Recipe, recipe_of_model, with_recipe_stored
 from controller.systems.base import TrainedModel
 from controller.systems.registry import DEFAULT_SYSTEM, SYSTEMS
 from controller.teach.acquisition import acquire, grid_for, random_set, transfer
-from controller.teach.heading_zero import default_range, headings, read_heading_zero
 from drivers.core import parts
 from drivers.core.cell_state import CellState
 from drivers.core.errors import FineposError
 from drivers.core.pose import Pose
 
 logger = logging.getLogger(__name__)
-
-# The systems ``rezero`` moves the zero of, and those that also keep a zero by heading.
-REZERO_SYSTEMS = tuple(name for name, system in SYSTEMS.items() if system.rezeroes)
-HEADING_ZERO_SYSTEMS = tuple(name for name, system in SYSTEMS.items()
-                             if system.zero_by_heading)
-# Frames ``rezero`` takes at the taught pose (training pinned the nets on 4 + 4): read three
-# at a time, eight means; fewer leave more of the dark frame's noise in the zero
-# (docs/decisions/0011-rezero-in-the-cells-light.md). 0.8 s at 30 frames a second. Where the
-# loop's settling look reads more frames at a time in that light (``LoopConfig.settle_count``)
-# it takes more, so that two whole such means fit.
-REZERO_FRAMES = 24
 
 DATASETS = ("nn1", "nn2", "test")
 
@@ -250,65 +239,10 @@ class FinePositioner:
                heading_step_deg: float | None = None,
                heading_range_deg: tuple[float, float] | None = None
                ) -> tuple[TrainedModel, dict]:
-        """Re-zero the part's model of ``system`` in the cell's light: move to the taught
-        pose, take ``frames`` frames (more where the means below need them: at least two, all
-        whole), move the model's zero there (Gabor: shift the translation nets,
-        ``calibration_free.rezero``, read on the frames' means as the loop's settling look
-        reads where ``settle_average`` is ``frames``: as many at a time as it reads where
-        single frames scatter as these do, ``LoopConfig.settle_count``; the image-alignment
-        servo: take its template again, ``calibration_free.baselines.align.rezero``), store
-        the model (atomically) and use it. The part must lie where it was taught.
-
-        With ``heading_step_deg`` (Gabor only) the full look's step is then also read with
-        the part turned to each heading of ``heading_range_deg`` (the part's turn from its
-        taught heading; default ``heading_zero.default_range``: one symmetry period centred
-        on it) in steps of at most that (``controller.teach.heading_zero``: the arm turns the
-        part itself, and centres the cube between its jaws; the other parts it reads between
-        looks back at the taught heading), and the model keeps it as its zero by heading:
-        NN2's turn and the translation. The loop takes it off
-        each full look's step. A re-zero without it drops the model's zero by heading.
-
-        Returns:
-            The model and what moved (the report's ``shift_mm``: each Gabor net's reading
-            before, mm; ``read_mm`` / ``read_deg``: the servo's; ``frame_scatter``: how far
-            single frames' steps scatter there, standard deviations mm, mm, deg, Gabor;
-            ``average``: the frames a mean is read on; ``heading_zero``: the zero by heading,
-            or null).
-
-        Raises:
-            FineposError: no model of ``system`` stored, a system that does not re-zero,
-                ``frames`` below 1, or a heading step for the servo.
-            TrainingError: the part is not seen whole there, or not where it was taught, or a
-                grasp to turn it failed (the model file is left as it was).
-        """
-        if isinstance(frames, bool) or not isinstance(frames, int) or frames < 1:
-            raise FineposError(f"rezero: frames must be a whole number >= 1, got {frames!r}")
-        impl = SYSTEMS[system]
-        if not impl.rezeroes:
-            raise FineposError(f"rezero: the {system} system does not re-zero (only "
-                               f"{' and '.join(REZERO_SYSTEMS)})")
-        if heading_step_deg is not None and not impl.zero_by_heading:
-            raise FineposError(f"rezero: a zero by heading is the "
-                               f"{' and '.join(HEADING_ZERO_SYSTEMS)} system's; the {system} "
-                               "system keeps one zero")
-        model = self.load_model(system=system)
-        if heading_step_deg is not None:  # refused before the arm moves
-            turns = headings(heading_step_deg, heading_range_deg
-                             or default_range(model.model.kappa, heading_step_deg))
-        self.move_to(self.state().nominal_pose)
-        images = [self.devices.camera.grab().image for _ in range(frames)]
-        done = impl.rezero(model, images, self.loop_config(model),
-                           lambda: self.devices.camera.grab().image)
-        moved, report = done.model, done.report
-        if heading_step_deg is not None:
-            estimator = impl.estimator(dataclasses.replace(model, model=moved))
-            table = read_heading_zero(self, estimator, turns, done.frames, done.average)
-            moved = impl.with_heading_zero(moved, table)
-            report["heading_zero"] = table.to_info()
-        model = dataclasses.replace(model, model=moved)
-        impl.save(model, self.model_path(system))
+        """Re-zero the part's model of ``system`` in the cell's light, and use it
+        (``controller.calibration.rezero.rezero``, which says how)."""
+        model, report = rezero(self, frames, system, heading_step_deg, heading_range_deg)
         self._model = model
-        logger.info("re-zeroed %s: %s", self.model_path(system), report)
         return model, report
 
     def use_model(self, model: TrainedModel) -> None:

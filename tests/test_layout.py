@@ -43,7 +43,7 @@ REAL_CELL_PATH = ("controller.cli", "controller.commands.serve", "controller.com
                   "controller.commands.workflow", "controller.commands.check",
                   "controller.commands.fit_timing", "controller.commands.replay",
                   "controller.service.service", "controller.fine_positioner", "controller.loop",
-                  "controller.systems", "controller.teach")
+                  "controller.systems", "controller.teach", "controller.calibration")
 # The lab: the simulator, the evaluation and comparisons (filter search, Table 1, paired
 # comparison), the benchmarks, the soak, and the research commands.
 LAB = ("sim_backend", "controller.evaluation", "controller.service.soak",

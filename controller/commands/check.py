@@ -16,6 +16,13 @@ from __future__ import annotations
 
 import argparse
 
+from controller.calibration.self_check import (
+    MAX_CORRECTION_DEG,
+    MAX_CORRECTION_MM,
+    MIN_SIMILARITY,
+    CheckLimits,
+    self_check,
+)
 from controller.commands.common import (
     add_config_option,
     add_system_option,
@@ -25,13 +32,6 @@ from controller.commands.common import (
 from controller.config import cell_part, with_part
 from controller.devices import open_devices
 from controller.fine_positioner import FinePositioner
-from controller.teach.self_check import (
-    MAX_CORRECTION_DEG,
-    MAX_CORRECTION_MM,
-    MIN_SIMILARITY,
-    CheckLimits,
-    self_check,
-)
 from controller.teach.state_folder import StateFolder
 from drivers.core import parts
 from drivers.core.files import write_json

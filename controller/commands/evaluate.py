@@ -70,6 +70,7 @@ import json
 import shlex
 import sys
 
+from controller.calibration.rezero import HEADING_ZERO_SYSTEMS, REZERO_SYSTEMS
 from controller.commands.common import (
     ALL_PARTS,
     add_config_option,
@@ -87,7 +88,6 @@ from controller.evaluation.mounts import evaluate_mounts
 from controller.evaluation.parts_table import parts_markdown, run_parts_table
 from controller.evaluation.randomized import TRIALS_PER_CELL, evaluate_randomized
 from controller.evaluation.trials import evaluate
-from controller.fine_positioner import HEADING_ZERO_SYSTEMS, REZERO_SYSTEMS
 from controller.loop.iteration_log import IterationLog
 from drivers.core import parts
 from drivers.core.errors import ConfigError

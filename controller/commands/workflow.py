@@ -11,6 +11,7 @@ from __future__ import annotations
 import contextlib
 
 from calibration_free.rezero import MAX_SHIFT_MM, MAX_TURN_DEG, NN2_MIN_DEG
+from controller.calibration.rezero import REZERO_FRAMES, REZERO_SYSTEMS
 from controller.commands.common import (
     TAUGHT_PART_HELP,
     add_command,
@@ -30,7 +31,7 @@ from controller.commands.common import (
 )
 from controller.commands.device_options import add_device_options, apply_device_options
 from controller.devices import open_devices
-from controller.fine_positioner import DATASETS, REZERO_FRAMES, REZERO_SYSTEMS, FinePositioner
+from controller.fine_positioner import DATASETS, FinePositioner
 from controller.recipe import load_recipe
 from controller.teach.spacenav import DEFAULT_SIM_START_OFFSET, TeachAborted, teach_with_spacenav
 from controller.teach.state_lock import locked_state_folder

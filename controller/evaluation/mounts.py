@@ -17,6 +17,7 @@ from pathlib import Path
 
 import numpy as np
 
+from controller.calibration.self_check import self_check
 from controller.devices import open_devices
 from controller.evaluation.trials import (
     build_report,
@@ -25,7 +26,6 @@ from controller.evaluation.trials import (
     train_on_default_scene,
 )
 from controller.fine_positioner import FinePositioner
-from controller.teach.self_check import self_check
 from sim_backend.cell import hand_camera
 from sim_backend.cell.optics import resolve_camera
 from sim_backend.cell.scene_config import ExposureConfig, LensConfig, MountConfig

@@ -95,7 +95,7 @@ def run_parts_table(config, *, system: str = "gabor", trials: int, seed: int,
         rezero: re-zero each part's model in each pair's light before its trials
             (``trials.rezeroed_on``; each row's ``rezero`` says what moved).
         rezero_heading_step: with ``rezero``, also its zero by heading in steps of at most
-            this (deg; ``controller.teach.heading_zero``).
+            this (deg; ``controller.calibration.heading_zero``).
         teach_lighting: teach each part, acquire and train under this lighting preset
             instead of the default scene's (each row's ``teach_lighting``).
 

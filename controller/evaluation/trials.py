@@ -25,10 +25,11 @@ from pathlib import Path
 import numpy as np
 from tqdm import tqdm
 
+from controller.calibration.rezero import REZERO_SYSTEMS
 from controller.devices import open_devices
 from controller.evaluation.hil import open_hil_devices
 from controller.evaluation.metrics import by_heading, summarise, wilson
-from controller.fine_positioner import REZERO_SYSTEMS, FinePositioner
+from controller.fine_positioner import FinePositioner
 from controller.systems.base import TrainedModel
 from controller.systems.registry import SYSTEMS
 from drivers.core.errors import FineposError

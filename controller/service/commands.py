@@ -12,7 +12,8 @@ import math
 from dataclasses import dataclass
 from typing import Any
 
-from controller.fine_positioner import DATASETS, REZERO_FRAMES, REZERO_SYSTEMS
+from controller.calibration.rezero import REZERO_FRAMES, REZERO_SYSTEMS
+from controller.fine_positioner import DATASETS
 from controller.systems.registry import SYSTEMS
 from drivers.core.parts import PARTS
 

@@ -204,7 +204,7 @@ class Service:
             fp = self._fp if self._machine.state is State.IDLE else None
         if fp is None or fp.devices is None:
             return
-        from controller.teach.self_check import run_self_check
+        from controller.calibration.self_check import run_self_check
 
         try:
             with self._device_lock:

@@ -73,7 +73,7 @@ class VisionSystem:
     and implement ``train``. A system declares the calibrations it supports: ``rezeroes``
     (``rezero``: a new zero read at the taught pose in the cell's light) and
     ``zero_by_heading`` (the model keeps a zero for each heading of the tool,
-    ``controller.teach.heading_zero``).
+    ``controller.calibration.heading_zero``).
     """
 
     name: ClassVar[str]

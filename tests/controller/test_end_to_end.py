@@ -7,11 +7,12 @@ import math
 import numpy as np
 import pytest
 
+from controller.calibration.rezero import REZERO_FRAMES
 from controller.cli import main
 from controller.config import load_config
 from controller.devices import open_devices
 from controller.evaluation.metrics import is_safe
-from controller.fine_positioner import REZERO_FRAMES, FinePositioner
+from controller.fine_positioner import FinePositioner
 from controller.loop.iteration_log import IterationLog, read_log
 from controller.loop.positioning import LoopConfig
 from controller.recipe import Recipe, with_recipe_stored
@@ -325,7 +326,7 @@ def test_rezero_by_heading_reads_a_part_the_jaws_cannot_centre_between_looks_bac
         fp.train()
         cell = devices.cell
         before = cell.object_pose()
-        with caplog.at_level("INFO", logger="controller.teach.heading_zero"):
+        with caplog.at_level("INFO", logger="controller.calibration.heading_zero"):
             _, report = fp.rezero(6, heading_step_deg=30.0)
         after = cell.object_pose()
         assert math.hypot(after[0] - before[0], after[1] - before[1]) < 0.4

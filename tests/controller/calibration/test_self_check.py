@@ -1,15 +1,16 @@
-"""The self-check (controller.teach.self_check) and ``finepos check`` on the simulated cell."""
+"""The self-check (controller.calibration.self_check) and `finepos check` on the simulated
+cell."""
 
 import json
 
 import numpy as np
 import pytest
 
+from controller.calibration.self_check import CheckLimits, self_check, similarity
 from controller.cli import main
 from controller.config import load_config
 from controller.devices import open_devices
 from controller.fine_positioner import FinePositioner
-from controller.teach.self_check import CheckLimits, self_check, similarity
 from sim_backend.cell.scene_config import MountConfig
 
 

@@ -8,8 +8,8 @@ import math
 import pytest
 
 from calibration_free.errors import TrainingError
-from controller.teach import heading_zero
-from controller.teach.heading_zero import MAX_HEADINGS, centres, default_range, headings
+from controller.calibration import heading_zero
+from controller.calibration.heading_zero import MAX_HEADINGS, centres, default_range, headings
 from drivers.core.pose import ToolStep
 
 
