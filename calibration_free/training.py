@@ -558,17 +558,85 @@ def train_bundle(nn1_data: Dataset, nn2_data: Dataset, *, object_kind: str, kapp
     pose = check_part(object_kind, kappa, nominal_pose)
     sets = training_sets(nn1_data, nn2_data, nn1_extra)
     prep = prepare_training(sets, polarity, localisation_channel, edge_gamma)
+    nets = _translation_nets(sets, prep, nn2_data, kappa, seed, nn1_epochs)
+    if nn2_weight_decay is None:
+        nn2_weight_decay = default_nn2_weight_decay(kappa)
+    if nn2_widen_px is None:
+        nn2_widen_px = default_nn2_widen_px(kappa)
+    rois = [prep.front.feature_roi(prep.normalised["nn2"][i], prep.found["nn2"][i], gabor.roi_px)
+            for i in prep.usable["nn2"]]
+    nn2_labels = nn2_data.labels[prep.usable["nn2"]]
+    nn2 = train_nn2(rois, nn2_labels[:, 2], kappa, gabor, seed=seed,
+                    hidden=nn2_hidden, epochs=nn2_epochs, weight_decay=nn2_weight_decay,
+                    widen_px=nn2_widen_px)
+    axis = _fine_axis(prep, rois, nn2_labels, kappa, gabor.roi_px) if fine_axis else None
+    training = {
+        "seed": seed,
+        "samples": {name: len(d) for name, d in sets.items()},
+        "skipped": {name: len(sets[name]) - int(prep.usable[name].size) for name in sets},
+        "preprocess_seconds": prep.seconds,
+        **nets.training(kappa),
+        "nn2": {**_summary(nn2), "weight_decay": nn2_weight_decay, "widen_px": nn2_widen_px},
+        "axis": ({"samples": axis.samples, "whole_rms_deg": axis.whole_rms_deg,
+                  "near_rms_deg": axis.near_rms_deg, "elongation": axis.elongation,
+                  "ends_rms_px": None if axis.ends is None else list(axis.ends.rms_px)}
+                 if axis is not None else None),
+        "seconds": time.perf_counter() - start,
+        "created_utc": time.strftime("%Y-%m-%dT%H:%M:%SZ", time.gmtime()),
+    }
+    logger.info("trained %s bundle in %.2f s (NN1 loss %.2e, NN2 loss %.2e)", object_kind,
+                training["seconds"], nets.nn1.loss_curve[-1], nn2.loss_curve[-1])
+    front = dataclasses.replace(prep.front, nominal_uv_px=nets.nominal_uv)
+    bundle = ModelBundle(object_kind=object_kind, kappa=kappa, nominal_pose=pose, front=front,
+                         gabor=gabor, nn1=nets.nn1.model, nn1_rot=nets.nn1_rot.model,
+                         nn1_near=nets.nn1_near.model, near_mm=nets.near_mm, nn2=nn2.model,
+                         axis=axis, training=training)
+    # every frame at the taught pose once (``nn1_extra`` is mostly the NN2 set again)
+    distinct = {id(data): data for data in sets.values()}.values()
+    return pinned_as_read(bundle, [data.images[i] for data in distinct
+                                   for i in np.flatnonzero(at_taught_pose(data.labels))])
+
+
+@dataclass
+class TranslationNets:
+    """The trained translation nets (``_translation_nets``) and what their training left."""
+
+    nn1: TrainedMLP
+    nn1_zero_offset: list[float]
+    nn1_rot: TrainedMLP
+    nn1_rot_zero_offset: list[float]
+    nn1_near: TrainedMLP
+    nn1_near_zero_offset: list[float]
+    near_mm: float
+    near_samples: int
+    nominal_uv: tuple[float, ...]
+
+    def training(self, kappa: int) -> dict:
+        """The bundle's training metadata of the three nets."""
+        return {
+            "nn1": {**_summary(self.nn1), "zero_offset_mm": self.nn1_zero_offset},
+            "nn1_rot": {**_summary(self.nn1_rot), "zero_offset_mm": self.nn1_rot_zero_offset},
+            "nn1_near": {**_summary(self.nn1_near), "zero_offset_mm": self.nn1_near_zero_offset,
+                         "samples": self.near_samples, "near_mm": self.near_mm,
+                         "weight_decay": default_near_weight_decay(kappa)},
+        }
+
+
+def _translation_nets(sets: dict[str, Dataset], prep: PreparedSets, nn2_data: Dataset,
+                      kappa: int, seed: int, epochs: int) -> TranslationNets:
+    """NN1 on (u, v) -> (dx, dy); the full loop's translation net on (u, v, sin, cos of kappa
+    dphi); and its correction near the taught pose; each pinned on the frames there."""
     uv, labels = nn1_samples(sets, prep)
     uvsc, dxdy, at_nominal = _translation_samples(uv, labels, kappa)
     if not at_nominal.any():
         logger.warning("no training image at the taught pose: NN1's zero is not pinned")
     nominal_uv = tuple(float(v) for v in (uv[at_nominal] if at_nominal.any() else uv)
                        .mean(axis=0))
-    nn1, nn1_zero_offset = _train_pinned(uv, dxdy, at_nominal, seed, nn1_epochs, NN1_HIDDEN)
+    nn1, nn1_zero_offset = _train_pinned(uv, dxdy, at_nominal, seed, epochs, NN1_HIDDEN)
     # The full loop knows the rotation (NN2) before it moves: the silhouette's centre shifts a
     # little with the part's rotation in the image, which (u, v) alone cannot tell apart from
     # a translation, so the full loop's translation also sees sin/cos(kappa dphi).
-    nn1_rot, nn1_rot_zero_offset = _train_pinned(uvsc, dxdy, at_nominal, seed + 2, nn1_epochs,
+    nn1_rot, nn1_rot_zero_offset = _train_pinned(uvsc, dxdy, at_nominal, seed + 2, epochs,
                                                  NN1_ROT_HIDDEN)
     # Where the loop makes its full loops and settles, a correction of that net fitted to the
     # samples near the taught pose: over the whole +/-25 mm range its error near zero
@@ -580,65 +648,31 @@ def train_bundle(nn1_data: Dataset, nn2_data: Dataset, *, object_kind: str, kapp
     near_mm, near = near_samples(dxdy, nn2_data.labels)
     residual = dxdy[near] - nn1_rot.model(uvsc[near])
     nn1_near, nn1_near_zero_offset = _train_pinned(uvsc[near], residual, at_nominal[near],
-                                                   seed + 3, nn1_epochs, NN1_ROT_HIDDEN,
+                                                   seed + 3, epochs, NN1_ROT_HIDDEN,
                                                    default_near_weight_decay(kappa))
+    return TranslationNets(nn1, nn1_zero_offset, nn1_rot, nn1_rot_zero_offset, nn1_near,
+                           nn1_near_zero_offset, near_mm, int(near.sum()), nominal_uv)
 
-    rois = [prep.front.feature_roi(prep.normalised["nn2"][i], prep.found["nn2"][i], gabor.roi_px)
-            for i in prep.usable["nn2"]]
-    nn2_labels = nn2_data.labels[prep.usable["nn2"]]
-    if nn2_weight_decay is None:
-        nn2_weight_decay = default_nn2_weight_decay(kappa)
-    if nn2_widen_px is None:
-        nn2_widen_px = default_nn2_widen_px(kappa)
-    nn2 = train_nn2(rois, nn2_labels[:, 2], kappa, gabor, seed=seed,
-                    hidden=nn2_hidden, epochs=nn2_epochs, weight_decay=nn2_weight_decay,
-                    widen_px=nn2_widen_px)
-    # An elongated part's long axis reads the turn near the taught pose (calibration_free.axis)
+
+def _fine_axis(prep: PreparedSets, rois: list[np.ndarray], nn2_labels: np.ndarray, kappa: int,
+               roi_px: int):
+    """An elongated part's long axis, which reads the turn near the taught pose
+    (``calibration_free.axis``; None for a part that is not elongated), with a bar's ends
+    (``calibration_free.ends``) where kappa is 2."""
     at_taught = at_taught_pose(nn2_labels)
-    axis = None
-    if fine_axis:
-        # the axis reads the part's coverage where every image's centre was read from colour
-        found = [prep.found["nn2"][i] for i in prep.usable["nn2"]]
-        coverage = [prep.front.coverage_roi(loc, gabor.roi_px) for loc in found]
-        axis = (fit_axis(coverage, prep.centres("nn2"), nn2_labels[:, 2], at_taught, kappa,
-                         "coverage") if all(c is not None for c in coverage) else
-                fit_axis(rois, prep.centres("nn2"), nn2_labels[:, 2], at_taught, kappa))
+    # the axis reads the part's coverage where every image's centre was read from colour
+    found = [prep.found["nn2"][i] for i in prep.usable["nn2"]]
+    coverage = [prep.front.coverage_roi(loc, roi_px) for loc in found]
+    axis = (fit_axis(coverage, prep.centres("nn2"), nn2_labels[:, 2], at_taught, kappa,
+                     "coverage") if all(c is not None for c in coverage) else
+            fit_axis(rois, prep.centres("nn2"), nn2_labels[:, 2], at_taught, kappa))
     if axis is not None and kappa == 2:  # a bar with a hidden end (calibration_free.ends)
         usable = prep.usable["nn2"]
         ends = fit_ends([prep.normalised["nn2"][i] for i in usable],
                         [prep.found["nn2"][i].part_mask for i in usable],
                         prep.centres("nn2"), at_taught, axis.direction, prep.front.threshold)
         axis = dataclasses.replace(axis, ends=ends)
-
-    training = {
-        "seed": seed,
-        "samples": {name: len(d) for name, d in sets.items()},
-        "skipped": {name: len(sets[name]) - int(prep.usable[name].size) for name in sets},
-        "preprocess_seconds": prep.seconds,
-        "nn1": {**_summary(nn1), "zero_offset_mm": nn1_zero_offset},
-        "nn1_rot": {**_summary(nn1_rot), "zero_offset_mm": nn1_rot_zero_offset},
-        "nn1_near": {**_summary(nn1_near), "zero_offset_mm": nn1_near_zero_offset,
-                     "samples": int(near.sum()), "near_mm": near_mm,
-                     "weight_decay": default_near_weight_decay(kappa)},
-        "nn2": {**_summary(nn2), "weight_decay": nn2_weight_decay, "widen_px": nn2_widen_px},
-        "axis": ({"samples": axis.samples, "whole_rms_deg": axis.whole_rms_deg,
-                  "near_rms_deg": axis.near_rms_deg, "elongation": axis.elongation,
-                  "ends_rms_px": None if axis.ends is None else list(axis.ends.rms_px)}
-                 if axis is not None else None),
-        "seconds": time.perf_counter() - start,
-        "created_utc": time.strftime("%Y-%m-%dT%H:%M:%SZ", time.gmtime()),
-    }
-    logger.info("trained %s bundle in %.2f s (NN1 loss %.2e, NN2 loss %.2e)", object_kind,
-                training["seconds"], nn1.loss_curve[-1], nn2.loss_curve[-1])
-    front = dataclasses.replace(prep.front, nominal_uv_px=nominal_uv)
-    bundle = ModelBundle(object_kind=object_kind, kappa=kappa, nominal_pose=pose, front=front,
-                         gabor=gabor, nn1=nn1.model, nn1_rot=nn1_rot.model,
-                         nn1_near=nn1_near.model, near_mm=near_mm, nn2=nn2.model,
-                         axis=axis, training=training)
-    # every frame at the taught pose once (``nn1_extra`` is mostly the NN2 set again)
-    distinct = {id(data): data for data in sets.values()}.values()
-    return pinned_as_read(bundle, [data.images[i] for data in distinct
-                                   for i in np.flatnonzero(at_taught_pose(data.labels))])
+    return axis
 
 
 def pinned_as_read(bundle: ModelBundle, taught_images: list[np.ndarray]) -> ModelBundle:
