@@ -16,7 +16,7 @@ import math
 import time
 from collections.abc import Mapping
 from dataclasses import dataclass
-from typing import Literal
+from typing import Any, Literal
 
 import cv2
 import numpy as np
@@ -279,7 +279,49 @@ def prepare_training(sets: dict[str, Dataset], polarity: Polarity | Literal["aut
     """
     start = time.perf_counter()
     height, width = _check_sets(sets)
-    image_area_px = height * width
+    intensity, candidates = _channel_images(sets, channel)
+    otsu = {c: _otsu([n for ns in imgs.values() for n in ns]) for c, imgs in candidates.items()}
+    channel, polarity = _channel_and_polarity(candidates, otsu, sets, polarity)
+    threshold = otsu[channel][0]
+    located = candidates[channel]
+    logger.info("localisation channel %s, %s part (separability %s)", channel, polarity,
+                ", ".join(f"{c} {v[1]:.2f}" for c, v in otsu.items()))
+    edge = ColourEdge(edge_gamma, fill_holes=True) if edge_gamma else None
+    expected_area, tolerance, max_elongation = _area_and_shape(
+        sets, located, threshold, polarity, height * width)
+    found = {name: [localise(n, threshold, expected_area, polarity=polarity,
+                             area_tolerance=tolerance, max_elongation=max_elongation,
+                             image=im, edge=edge)
+                    for n, im in zip(located[name], sets[name].images, strict=True)]
+             for name in sets}
+    usable = {name: _usable(found[name], name) for name in sets}
+    # The part's colour, so that a blob of its size and shape but another colour is not taken
+    # for it in a cluttered image.
+    blobs = [(sets[name].images[i], _blob_at(located[name][i], threshold, polarity,
+                                             found[name][i]))
+             for name in sets for i in usable[name]]
+    colour = learn_chroma([im for im, _ in blobs], [b for _, b in blobs])
+    chroma, chroma_tolerance = colour if colour is not None else (None, 0.0)
+    taught, outline, turned = _taught_view(sets, found, usable)
+    front = FrontEnd(height, width, intensity, threshold, polarity, expected_area, tolerance,
+                     max_elongation, channel, chroma=chroma, chroma_tolerance=chroma_tolerance,
+                     feature_floor=FEATURE_FLOOR if channel == "saturation" else 0.0,
+                     feature_ceiling=FEATURE_CEILING if channel == "saturation" else 0.0,
+                     taught_area_px=float(np.mean(taught)) if taught else None,
+                     taught_outline_px=outline, turned_outlines_px=turned,
+                     edge_gamma=float(edge_gamma), edge_fill_holes=bool(edge_gamma))
+    return PreparedSets(front, located, found, usable, time.perf_counter() - start)
+
+
+def _channel_images(sets: dict[str, Dataset], channel: Channel | Literal["auto"]
+                    ) -> tuple[IntensityStats, dict[str, dict[str, list[np.ndarray]]]]:
+    """The sets' intensity statistics (of the max-channel images) and each candidate
+    channel's images: ``max`` (normalised max(R,G,B)) and, for ``saturation`` or ``auto``,
+    ``saturation`` (``saturation`` alone for ``saturation``).
+
+    Raises:
+        TrainingError: an image is flat.
+    """
     split = {name: [max_and_saturation_u8(im) for im in data.images]
              for name, data in sets.items()}
     grays = {name: [g for g, _ in pairs] for name, pairs in split.items()}
@@ -299,21 +341,23 @@ def prepare_training(sets: dict[str, Dataset], polarity: Polarity | Literal["aut
                                     for name, pairs in split.items()}
         if channel == "saturation":
             del candidates["max"]
-    otsu = {c: _otsu([n for ns in imgs.values() for n in ns]) for c, imgs in candidates.items()}
-    channel, polarity = _channel_and_polarity(candidates, otsu, sets, polarity)
-    threshold = otsu[channel][0]
-    located = candidates[channel]
-    logger.info("localisation channel %s, %s part (separability %s)", channel, polarity,
-                ", ".join(f"{c} {v[1]:.2f}" for c, v in otsu.items()))
+    return intensity, candidates
 
-    edge = ColourEdge(edge_gamma, fill_holes=True) if edge_gamma else None
 
-    def find(name: str, area: float | None) -> list[Localisation]:
-        return [localise(n, threshold, area, polarity=polarity) for n in located[name]]
+def _area_and_shape(sets: dict[str, Dataset], located: dict[str, list[np.ndarray]],
+                    threshold: float, polarity: Polarity, image_area_px: int
+                    ) -> tuple[float, float, float]:
+    """The part's expected blob area, its relative tolerance and its largest elongation,
+    from every training image.
 
+    Raises:
+        TrainingError: the part is found in no image, or covers most of one (the table).
+    """
     # The blob's area changes with the displacement (the camera looks at a tilt: nearer is
     # bigger), so the accepted window spans every training image's area, plus a margin.
-    areas = np.array([loc.area_px for name in sets for loc in find(name, None) if loc.ok])
+    areas = np.array([loc.area_px for name in sets
+                      for loc in (localise(n, threshold, None, polarity=polarity)
+                                  for n in located[name]) if loc.ok])
     if areas.size == 0:
         raise TrainingError("the object was found in none of the training images")
     lo, hi = float(areas.min()), float(areas.max())
@@ -325,27 +369,19 @@ def prepare_training(sets: dict[str, Dataset], polarity: Polarity | Literal["aut
     # The trained part's shape: clutter of the right area but another shape (a bar) is not it.
     shapes = [_elongation_of_largest_blob(n, threshold, polarity)
               for ns in located.values() for n in ns]
-    max_elongation = max(shapes) * ELONGATION_MARGIN
-    found = {name: [localise(n, threshold, expected_area, polarity=polarity,
-                             area_tolerance=tolerance, max_elongation=max_elongation,
-                             image=im, edge=edge)
-                    for n, im in zip(located[name], sets[name].images, strict=True)]
-             for name in sets}
-    usable = {name: _usable(found[name], name) for name in sets}
-    # The part's colour, so that a blob of its size and shape but another colour is not taken
-    # for it in a cluttered image.
-    blobs = [(sets[name].images[i], _blob_at(located[name][i], threshold, polarity,
-                                             found[name][i]))
-             for name in sets for i in usable[name]]
-    colour = learn_chroma([im for im, _ in blobs], [b for _, b in blobs])
-    chroma, chroma_tolerance = colour if colour is not None else (None, 0.0)
-    # The part's area and outline where the loop settles: the frames taken at the taught pose.
+    return expected_area, tolerance, max(shapes) * ELONGATION_MARGIN
+
+
+def _taught_view(sets: dict[str, Dataset], found: dict[str, list[Localisation]],
+                 usable: dict[str, np.ndarray]) -> tuple[list[float], Any, tuple]:
+    """The part's areas at the taught pose, its outline there (None: not seen there) and
+    turned (the NN2 grid's images turn it over its symmetry period): where the loop
+    settles."""
     at_pose = [found[name][i] for name in sets
                for i in np.flatnonzero(at_taught_pose(sets[name].labels)) if found[name][i].ok]
     taught = [loc.area_px for loc in at_pose]
     outline = (taught_outline(at_pose[0].part_mask, at_pose[0].u_px, at_pose[0].v_px)
                if at_pose else None)
-    # ... and turned: the NN2 grid's images turn the part over its symmetry period
     turned = ()
     if outline is not None and "nn2" in sets:
         nn2 = found["nn2"]
@@ -353,14 +389,7 @@ def prepare_training(sets: dict[str, Dataset], polarity: Polarity | Literal["aut
             sets["nn2"].labels[usable["nn2"], 2],
             [taught_outline(nn2[i].part_mask, nn2[i].u_px, nn2[i].v_px)
              for i in usable["nn2"]])
-    front = FrontEnd(height, width, intensity, threshold, polarity, expected_area, tolerance,
-                     max_elongation, channel, chroma=chroma, chroma_tolerance=chroma_tolerance,
-                     feature_floor=FEATURE_FLOOR if channel == "saturation" else 0.0,
-                     feature_ceiling=FEATURE_CEILING if channel == "saturation" else 0.0,
-                     taught_area_px=float(np.mean(taught)) if taught else None,
-                     taught_outline_px=outline, turned_outlines_px=turned,
-                     edge_gamma=float(edge_gamma), edge_fill_holes=bool(edge_gamma))
-    return PreparedSets(front, located, found, usable, time.perf_counter() - start)
+    return taught, outline, turned
 
 
 def _blob_at(preprocessed: np.ndarray, threshold: float, polarity: Polarity,
