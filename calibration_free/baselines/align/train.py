@@ -78,18 +78,62 @@ def train_align(nn1_data: Dataset, nn2_data: Dataset, *, object_kind: str, kappa
         return front.feature_frame(prep.normalised[name][i], prep.found[name][i])
 
     taught = [(name, i) for (name, i), here in zip(samples, at_nominal, strict=True) if here]
+    image, size = _template_image(prep, taught, silhouette, nominal_uv, config.margin_px)
+    template = Template(image, kappa, config.scan_step_deg, config.ecc_iterations,
+                        config.ecc_epsilon)
+    regs = [template.register(silhouette(name, i), prep.found[name][i].u_px,
+                              prep.found[name][i].v_px) for name, i in samples]
+    phi, xy, fitted = _fit(regs, nominal_uv, labels, samples, at_nominal, kappa, config)
+    model = AlignModel(object_kind=object_kind, kappa=kappa, nominal_pose=pose, front=front,
+                       config=config, template=image, xy=xy, phi=phi.reshape(-1),
+                       training={})
+    residual = np.array([model.step(r) for r in regs]) - labels
+    residual[:, 2] = [wrap_deg(d, 360.0 / kappa) for d in residual[:, 2]]
+    near = ~np.array([name == "nn1" for name, _ in samples])
+    training = {
+        "samples": {name: len(d) for name, d in sets.items()},
+        "images": len(nn1_data) + len(nn2_data),
+        "skipped": {name: len(sets[name]) - int(prep.usable[name].size) for name in sets},
+        "preprocess_seconds": prep.seconds,
+        "template_px": size,
+        "refined": int(sum(r.refined for r in regs)),
+        "fitted": int(fitted.sum()),
+        "fit_rms": {"all": np.sqrt(np.mean(residual[fitted] ** 2, axis=0)).tolist(),
+                    "near": np.sqrt(np.mean(residual[near & fitted] ** 2, axis=0)).tolist()},
+        "seconds": time.perf_counter() - start,
+        "created_utc": time.strftime("%Y-%m-%dT%H:%M:%SZ", time.gmtime()),
+    }
+    logger.info("trained align model for %s in %.2f s (template %d px, %d of %d refined, "
+                "fit RMS near %s)", object_kind, training["seconds"], size,
+                training["refined"], len(regs),
+                ", ".join(f"{v:.3f}" for v in training["fit_rms"]["near"]))
+    return dataclasses.replace(model, training=training)
+
+
+def _template_image(prep, taught: list[tuple[str, int]], silhouette, nominal_uv: tuple,
+                    margin_px: int) -> tuple[np.ndarray, int]:
+    """The template: the mean silhouette of the frames at the taught pose, cut square around
+    the taught position, the part's diagonal plus ``margin_px`` on each side; and its size."""
     extent = 0
     for name, i in taught:
         _, _, w, h = cv2.boundingRect(prep.found[name][i].part_mask)
         extent = max(extent, int(math.ceil(math.hypot(w, h))))
-    size = extent + 2 * config.margin_px
+    size = extent + 2 * margin_px
     image = np.mean([cv2.getRectSubPix(silhouette(name, i), (size, size), nominal_uv)
                      for name, i in taught], axis=0).astype(np.float32)
-    template = Template(image, kappa, config.scan_step_deg, config.ecc_iterations,
-                        config.ecc_epsilon)
+    return image, size
 
-    regs = [template.register(silhouette(name, i), prep.found[name][i].u_px,
-                              prep.found[name][i].v_px) for name, i in samples]
+
+def _fit(regs: list, nominal_uv: tuple, labels: np.ndarray, samples: list[tuple[str, int]],
+         at_nominal: np.ndarray, kappa: int, config: AlignConfig
+         ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """The weighted least-squares maps from the registrations to the turn (``phi``) and to
+    the translation (``xy``), and which registrations were fitted (correlation high enough).
+
+    Raises:
+        TrainingError: too few images registered well, or the image turn does not follow the
+            tool's.
+    """
     du = np.array([r.u_px for r in regs]) - nominal_uv[0]
     dv = np.array([r.v_px for r in regs]) - nominal_uv[1]
     angle = np.array([r.angle_deg for r in regs])
@@ -118,27 +162,4 @@ def train_align(nn1_data: Dataset, nn2_data: Dataset, *, object_kind: str, kappa
     read = phi_basis(du, dv, angle, kappa) @ phi[:, 0]
     xy, *_ = np.linalg.lstsq(xy_basis(du, dv, read, kappa) * sw, labels[:, :2] * sw,
                              rcond=None)
-    model = AlignModel(object_kind=object_kind, kappa=kappa, nominal_pose=pose, front=front,
-                       config=config, template=image, xy=xy, phi=phi.reshape(-1),
-                       training={})
-    residual = np.array([model.step(r) for r in regs]) - labels
-    residual[:, 2] = [wrap_deg(d, period) for d in residual[:, 2]]
-    near = ~np.array([name == "nn1" for name, _ in samples])
-    training = {
-        "samples": {name: len(d) for name, d in sets.items()},
-        "images": len(nn1_data) + len(nn2_data),
-        "skipped": {name: len(sets[name]) - int(prep.usable[name].size) for name in sets},
-        "preprocess_seconds": prep.seconds,
-        "template_px": size,
-        "refined": int(sum(r.refined for r in regs)),
-        "fitted": int(fitted.sum()),
-        "fit_rms": {"all": np.sqrt(np.mean(residual[fitted] ** 2, axis=0)).tolist(),
-                    "near": np.sqrt(np.mean(residual[near & fitted] ** 2, axis=0)).tolist()},
-        "seconds": time.perf_counter() - start,
-        "created_utc": time.strftime("%Y-%m-%dT%H:%M:%SZ", time.gmtime()),
-    }
-    logger.info("trained align model for %s in %.2f s (template %d px, %d of %d refined, "
-                "fit RMS near %s)", object_kind, training["seconds"], size,
-                training["refined"], len(regs),
-                ", ".join(f"{v:.3f}" for v in training["fit_rms"]["near"]))
-    return dataclasses.replace(model, training=training)
+    return phi, xy, fitted
