@@ -132,24 +132,7 @@ def train_hough(nn1_data: Dataset, nn2_data: Dataset, *, object_kind: str, kappa
     front, locs = prep.front, prep.found
     settings = _edge_settings(prep, config)
 
-    outlines = {name: [find_outline(n, front, loc, config, settings, 2 * pairs)
-                       if loc.ok else None
-                       for n, loc in zip(prep.normalised[name], locs[name], strict=True)]
-                for name in sets}
-
-    def constellations(model: ConstellationModel) -> dict[str, list[Constellation | None]]:
-        return {name: [find_constellation(o.lines, model, (loc.u_px, loc.v_px))[0]
-                       if o is not None else None
-                       for o, loc in zip(outlines[name], locs[name], strict=True)]
-                for name in sets}
-
-    first = constellations(prior_model(kappa, math.sqrt(front.expected_area_px)))
-    model = learn_model([c for cs in first.values() for c in cs if c is not None], kappa,
-                        width_margin=config.width_margin,
-                        angle_margin_deg=config.angle_margin_deg,
-                        vote_fraction=config.line_vote_fraction)
-    found = constellations(model)
-
+    model, found = _constellations(prep, config, settings, kappa, pairs)
     rot = [i for i, c in enumerate(found["nn2"]) if c is not None]
     if len(rot) < max(4, len(found["nn2"]) // 2):
         raise TrainingError(f"nn2: a valid outline in only {len(rot)} of {len(found['nn2'])} "
@@ -184,3 +167,29 @@ def train_hough(nn1_data: Dataset, nn2_data: Dataset, *, object_kind: str, kappa
     return HoughModel(object_kind=object_kind, kappa=kappa, nominal_pose=pose, front=front,
                       config=config, edge_settings=settings, constellation=model,
                       angle_map=amap, psom=psom, training=training)
+
+
+def _constellations(prep, config: HoughConfig, settings, kappa: int, pairs: int):
+    """The constellation model learnt from the training outlines (first matched against the
+    part's prior model), and each training image's constellation under it (None where its
+    outline is not found)."""
+    front, locs = prep.front, prep.found
+    sets = prep.found.keys()
+    outlines = {name: [find_outline(n, front, loc, config, settings, 2 * pairs)
+                       if loc.ok else None
+                       for n, loc in zip(prep.normalised[name], locs[name], strict=True)]
+                for name in sets}
+
+    def constellations(model: ConstellationModel) -> dict[str, list[Constellation | None]]:
+        return {name: [find_constellation(o.lines, model, (loc.u_px, loc.v_px))[0]
+                       if o is not None else None
+                       for o, loc in zip(outlines[name], locs[name], strict=True)]
+                for name in sets}
+
+    first = constellations(prior_model(kappa, math.sqrt(front.expected_area_px)))
+    model = learn_model([c for cs in first.values() for c in cs if c is not None], kappa,
+                        width_margin=config.width_margin,
+                        angle_margin_deg=config.angle_margin_deg,
+                        vote_fraction=config.line_vote_fraction)
+    found = constellations(model)
+    return model, found
