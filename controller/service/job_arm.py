@@ -19,7 +19,7 @@ from typing import TypeVar
 
 from drivers.core.errors import MotionRejectedError
 from drivers.core.pose import Pose, ToolStep
-from drivers.interfaces import Arm, Lifecycle, Motion
+from drivers.interfaces import Arm, Descent, Lifecycle, Motion
 from drivers.safety import SafetyLimits
 
 T = TypeVar("T")
@@ -113,6 +113,20 @@ class PreemptibleArm:
         motion = self._move(lambda: self.inner.move_tool(step))
         self._seen(motion.pose)
         return motion
+
+    @property
+    def runs_programs(self) -> bool:
+        """Whether the wrapped arm runs the guarded descent as a program (``Arm.runs_programs``)."""
+        return self.inner.runs_programs
+
+    def guarded_descent(self, via: Pose, target: Pose, guard_speed_percent: float,
+                        guard_mm: float) -> Descent:
+        """The wrapped arm's guarded descent (``Arm.guarded_descent``), keeping the pose
+        reached (refused after ``preempt``)."""
+        descent = self._move(lambda: self.inner.guarded_descent(via, target,
+                                                                guard_speed_percent, guard_mm))
+        self._seen(descent.pose)
+        return descent
 
     def set_speed(self, percent: float) -> None:
         """Monitor speed in percent, 0 < percent <= 100 (refused after ``preempt``)."""

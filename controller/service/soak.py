@@ -93,7 +93,7 @@ RECOVERY_TIMEOUT_S = 60.0
 POLL_S = 0.05
 # A fault goes in at a random moment this long into its job (ideal jobs take about 0.4 s).
 INJECT_WITHIN_S = {"ideal": 0.2, "realistic": 1.5}
-MOTION_COMMANDS = ("do", "calibrate")  # monitor commands that move the arm or the hand
+MOTION_COMMANDS = ("do", "calibrate", "execute")  # monitor commands that move the arm or hand
 
 
 class SoakError(RuntimeError):
@@ -101,12 +101,16 @@ class SoakError(RuntimeError):
 
 
 def is_motion(line: str) -> bool:
-    """Whether a VAL monitor line asks for motion (``do ...``, ``cal[ibrate]``)."""
-    words = line.strip().split(None, 1)
+    """Whether a VAL monitor line asks for motion (``do ...`` but ``do set``,
+    ``cal[ibrate]``, ``ex[ecute]`` of a program)."""
+    words = line.strip().split(None, 2)
     if not words:
         return False
     head = words[0].lower()
-    return head == "do" or (len(head) >= 3 and "calibrate".startswith(head))
+    if head == "do":
+        return len(words) < 2 or words[1].lower() != "set"
+    return ((len(head) >= 3 and "calibrate".startswith(head))
+            or (len(head) >= 2 and "execute".startswith(head)))
 
 
 class MotionLedger:
@@ -301,12 +305,14 @@ class Soak:
 
     fault_rate: the share of cycles that get a fault (with ``faults``); kinds: the fault kinds
     drawn from; reset_after_abort: the client sends ``reset`` after an aborted job before moving
-    again (as it must; False makes a client that does not, whose next motion is an unsafe one).
+    again (as it must; False makes a client that does not, whose next motion is an unsafe one);
+    programs: the VAL driver's program path (``arm.programs``): the grasp's descent runs as a
+    program on the emulated controller, stopped by the emulated sensor's output.
     """
 
     def __init__(self, cycles: int, faults: bool, seed: int, timing: str = "ideal", *,
                  fault_rate: float = FAULT_RATE, kinds: tuple[str, ...] = FAULT_KINDS,
-                 reset_after_abort: bool = True) -> None:
+                 reset_after_abort: bool = True, programs: bool = False) -> None:
         if not 0.0 <= fault_rate <= 1.0:
             raise ValueError(f"fault_rate must be within [0, 1], got {fault_rate}")
         if timing not in MOVE_TIMEOUT_S:
@@ -320,6 +326,7 @@ class Soak:
         self.kinds = kinds
         self.fault_rate = fault_rate
         self.reset_after_abort = reset_after_abort
+        self.programs = programs
         self.rng = random.Random(seed)
         self.seed = seed
         self.ledger = MotionLedger()
@@ -350,7 +357,8 @@ class Soak:
             self.emulators = emulators
             assert emulators.val is not None
             emulators.val.add_listener(self.ledger.on_val)
-            config = soak_config(work, self.socket_path, emulators, self.timing)
+            config = soak_config(work, self.socket_path, emulators, self.timing,
+                                 programs=self.programs)
             with running_service(config, cell_opener(emulators)), \
                     ServiceClient(self.socket_path, timeout_s=JOB_TIMEOUT_S) as client:
                 self._client = client
@@ -602,6 +610,9 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--seed", type=int, default=0, help="seed of the faults and offsets")
     parser.add_argument("--timing", choices=("ideal", "realistic"), default="ideal",
                         help="the emulated cell's timing (default ideal: as fast as it goes)")
+    parser.add_argument("--programs", action="store_true",
+                        help="the VAL driver's program path (arm.programs): the grasp's "
+                             "descent as one program on the emulated controller")
     parser.add_argument("--json", metavar="OUT", help="also write the report here")
 
 
@@ -618,7 +629,8 @@ def _positive_int(text: str) -> int:
 def run(args: argparse.Namespace) -> int:
     """Run the soak and print the JSON report (also to ``--json``); 1 when an invariant fails
     (recovered != injected, an unsafe motion, a lost log line, a partial file)."""
-    report = Soak(args.cycles, args.faults, args.seed, args.timing).run()
+    report = Soak(args.cycles, args.faults, args.seed, args.timing,
+                  programs=args.programs).run()
     write_json(args.json, report)
     ok = (report["faults_recovered"] == report["faults_injected"]
           and report["unsafe_motions"] == 0 and report["log_lines_lost"] == 0

@@ -22,6 +22,9 @@ def test_motion_lines():
     assert is_motion("do move trans(1,2,3,4,5,6)")
     assert is_motion("DO READY")
     assert is_motion("cal")
+    assert is_motion("ex fpdesc")  # a program run (arm.programs)
+    assert not is_motion("do set fpd=trans(1,2,3,4,5,6)")
+    assert not is_motion("edit fpdesc") and not is_motion("listp fpdesc")
     assert not is_motion("where")
     assert not is_motion("speed 50")
     assert not is_motion("abort")
@@ -84,8 +87,9 @@ def test_bad_arguments_are_refused():
 
 
 @pytest.mark.slow
-def test_short_soak_with_faults_keeps_its_invariants():
-    report = Soak(14, True, seed=3, fault_rate=1.0).run()
+@pytest.mark.parametrize("programs", [False, True], ids=["host path", "program path"])
+def test_short_soak_with_faults_keeps_its_invariants(programs):
+    report = Soak(14, True, seed=3, fault_rate=1.0, programs=programs).run()
     assert report["cycles"] == 14
     assert report["faults_injected"] > 0
     assert report["faults_recovered"] == report["faults_injected"], report["problems"]
