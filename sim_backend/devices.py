@@ -59,6 +59,9 @@ _ANIMATION_STEP_S = 0.02
 # A motion that a condition may stop (``SimArm.move_until``) looks at it this often along its
 # path (mm): at 8 N/mm contact stiffness, 2 N between two looks.
 _WATCH_STEP_MM = 0.25
+# Without timing (``ideal``: nothing is measured in time or force) every 1 mm, so a program's
+# descent stays quick behind the emulators.
+_IDEAL_WATCH_STEP_MM = 1.0
 # The VAL lines of one guarded descent on the program path, as the VAL driver's defaults send
 # them: two ``do set`` lines of a location (57 characters each), ``ex fpdesc``, the ``*``
 # prompt and the closing prompt (see ``drivers.val.config``).
@@ -214,7 +217,8 @@ class SimArm(Arm):
         speed = min(VAL_SPEED_MAX, max(VAL_SPEED_MIN, self.speed_percent * speed_factor))
         step = start.tool_step_to(target)
         distance = math.hypot(step.dx_mm, step.dy_mm, step.dz_mm)
-        count = max(1, math.ceil(distance / _WATCH_STEP_MM))
+        count = max(1, math.ceil(distance / (_WATCH_STEP_MM if timing is not None
+                                             else _IDEAL_WATCH_STEP_MM)))
         arm = timing.config.arm if timing is not None else None
         profile_s = joint_motion_s(delta, speed, arm) if arm is not None else 0.0
         t0 = arm.t0_s if arm is not None and setup else 0.0

@@ -89,7 +89,18 @@ class ValArm(Arm):
 
     def _handshake(self) -> None:
         timeout_s = self.config.exchange_timeout_s
-        reply = self.link.exchange("", timeout_s, echo=False)
+        try:
+            reply = self.link.exchange("", timeout_s, echo=False)
+        except DeviceTimeoutError:
+            if not self.link.last_partial.rstrip().endswith(b"*"):
+                raise
+            # A program still runs (its prompt is "*"; a lost link or a fault left it): stop
+            # it, then wake the monitor again.
+            logger.warning("VAL start-up: a program is running; sending %r",
+                           self.config.commands.halt)
+            with contextlib.suppress(DeviceTimeoutError, ProtocolError):
+                self.link.exchange(self.config.commands.halt, timeout_s, echo=self.config.echo)
+            reply = self.link.exchange("", timeout_s, echo=False)
         for _ in range(_MAX_BOOT_QUESTIONS):
             if reply.kind is not ReplyKind.QUESTION:
                 self._check(reply, "<wake>")
@@ -196,8 +207,15 @@ class ValArm(Arm):
                                                                           **pose.as_dict()))
         halts = self._halts
         line = cfg.commands.execute.format(program="fpdesc")
-        with self._faulting(line):
-            reply = self._command(line, cfg.move_timeout_s)
+        try:
+            with self._faulting(line):
+                reply = self._command(line, cfg.move_timeout_s)
+        except (DeviceTimeoutError, ProtocolError):
+            # the program may still be moving the arm: stop it before giving up (best effort;
+            # the arm is in fault already)
+            with contextlib.suppress(DeviceTimeoutError, ProtocolError, DeviceFaultError):
+                self.link.exchange(cfg.commands.halt, cfg.exchange_timeout_s, echo=cfg.echo)
+            raise
         if self._halts != halts:
             raise MotionRejectedError("halted during the descent program")
         contact = any(text.strip().casefold() == cfg.program_contact_text.casefold()

@@ -56,6 +56,7 @@ class ValLink:
         self._interrupts = 0  # bumped by interrupt(); an exchange started before it ends
         self.bytes_written = 0
         self.bytes_read = 0
+        self.last_partial = b""  # what the last exchange that timed out had received
 
     def open(self) -> None:
         """Open the port (raises DeviceFaultError when it cannot be opened)."""
@@ -132,6 +133,7 @@ class ValLink:
                 raise ExchangeInterrupted(f"VAL: waiting for the reply to {line!r} was "
                                           "interrupted (halt)")
             if time.monotonic() >= deadline:
+                self.last_partial = bytes(buffer)
                 raise DeviceTimeoutError(f"VAL: no complete reply to {line!r} within "
                                          f"{timeout_s:g} s (received {bytes(buffer)[-80:]!r})")
             if len(buffer) > _MAX_REPLY_BYTES:

@@ -154,3 +154,46 @@ def test_a_lost_link_during_a_program_is_a_fault(emulator, backing):
             arm.guarded_descent(down(20.0), down(30.0), 25.0, 4.0)
         with pytest.raises(DeviceFaultError):
             arm.move_tool(ToolStep(dz_mm=1.0))
+
+
+def test_a_program_outliving_its_wait_is_aborted_and_reset_recovers(emulator, backing):
+    release = threading.Event()
+    original = backing._move_to
+
+    def stuck(target):  # the arm's motion outlasts the driver's move timeout
+        release.wait(WAIT_S)
+        return original(target)
+
+    backing._move_to = stuck
+    lines = heard(emulator)
+    with program_arm(emulator, move_timeout_s=0.3) as arm:
+        with pytest.raises(DeviceTimeoutError):
+            arm.guarded_descent(down(20.0), down(30.0), 25.0, 4.0)
+        release.set()
+        assert "abort" in lines  # the driver stopped the program before giving up
+        backing._move_to = original
+        arm.reset()
+        arm.activate()
+        arm.move_tool(ToolStep(dz_mm=1.0))
+
+
+def test_connecting_while_a_program_runs_stops_it_first(emulator, backing):
+    release = threading.Event()
+    original = backing._move_to
+
+    def stuck(target):
+        release.wait(WAIT_S)
+        return original(target)
+
+    with program_arm(emulator) as arm:
+        arm.guarded_descent(down(10.0), down(20.0), 25.0, 4.0)  # programs entered and fitted
+    backing._move_to = stuck
+    session = emulator.monitor
+    response = session.handle_line("ex fpdesc")  # another client left a program running
+    response.after()
+    assert session.program_running
+    release.set()
+    backing._move_to = original
+    with program_arm(emulator) as arm:
+        assert not session.program_running
+        arm.move_tool(ToolStep(dz_mm=1.0))

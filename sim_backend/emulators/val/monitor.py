@@ -151,6 +151,7 @@ class ValMonitor:
         self._run: ProgramRun | None = None
         self._thread: threading.Thread | None = None
         self._starting: Callable[[], None] | None = None
+        self._active = False  # a program runs (from EXECUTE to its end or ABORT)
         self.on_program_end: Callable[[bytes], None] = lambda _data: None
         self.programs_run = 0
 
@@ -168,8 +169,7 @@ class ValMonitor:
 
     @property
     def program_running(self) -> bool:
-        return self._thread is not None and (self._thread.is_alive()
-                                             or self._thread.ident is None)
+        return self._active
 
     def wait_program(self, timeout_s: float | None = None) -> bool:
         """Wait for a running program to end; False on timeout."""
@@ -185,6 +185,7 @@ class ValMonitor:
             self._run.abort()
             self._arm_halt()
             self.wait_program()
+            self._active = False
 
     def first_output(self) -> bytes:
         """What the controller prints when it comes up: the first boot question or the prompt."""
@@ -296,9 +297,11 @@ class ValMonitor:
                 lines = [f"*{exc}*"]
             except FineposError as exc:
                 lines = [f"*{_refusal_text(exc)}*"]
+            self._active = False  # the monitor takes commands again before the prompt goes
             if not run.aborted.is_set():
                 self.on_program_end(b"\r\n" + _text(run.output + lines, PROMPT))
 
+        self._active = True
         self._thread = threading.Thread(target=body, name=f"VAL program {name}", daemon=True)
         self._starting = self._thread.start
         return _text([], PROGRAM_PROMPT)
@@ -306,6 +309,8 @@ class ValMonitor:
     def _while_running(self, line: str) -> bytes:
         words = line.strip().lower().split()
         head = words[0] if words else ""
+        if not head:
+            return _text([], PROGRAM_PROMPT)
         if head and "abort".startswith(head) and len(head) >= 2 and len(words) == 1:
             self.stop_program()
             return _text([], PROMPT)
