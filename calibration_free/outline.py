@@ -254,8 +254,30 @@ def fit_outline(channel: np.ndarray, part_mask: np.ndarray, u_px: float, v_px: f
         template, fit = min(starts, key=lambda item: item[1][3])
         start = fit[:3]
     rot, scale, shift, _ = icp(template, *start, ITERATIONS)
-    # Point to line: matched points may slide along the outline, so a point-to-point fit
-    # turns too little; each point's distance along the taught outline's normal does not.
+    theta, scale, shift = _point_to_line(template, seen, gaps, rot, scale, shift)
+    rot = _turn(theta)
+    for _ in range(ITERATIONS):  # the shift by matched points, the turn and scale kept
+        placed = scale * template @ rot.T
+        last = shift
+        shift = (seen - placed[gaps(placed + shift).argmin(axis=1)]).mean(axis=0)
+        if np.abs(shift - last).max() < 1e-3:
+            break
+    closest = gaps(scale * template @ rot.T + shift).min(axis=1)
+    rms = float(np.sqrt(np.maximum(closest, 0.0).mean()))
+    turn = math.degrees(theta)
+    if rms > MAX_RMS_PX or not SCALE_RANGE[0] <= scale <= SCALE_RANGE[1] \
+            or abs(turn) > MAX_TURN_DEG:
+        return None
+    return OutlineFit(float(shift[0]), float(shift[1]), turn, scale, rms, len(seen),
+                      tuple((float(u), float(v)) for u, v in template))
+
+
+def _point_to_line(template: np.ndarray, seen: np.ndarray, gaps, rot: np.ndarray,
+                   scale: float, shift: np.ndarray) -> tuple[float, float, np.ndarray]:
+    """Refine a fit point to line: matched points may slide along the outline, so a
+    point-to-point fit turns too little; each point's distance along the taught outline's
+    normal does not. ``gaps`` gives the squared distances, seen x placed. Returns the turn
+    (rad), the scale and the shift."""
     theta = math.atan2(rot[1, 0], rot[0, 0])
     normals = _outward_normals(template, np.zeros(2))
     across = np.column_stack([-template[:, 1], template[:, 0]])
@@ -273,21 +295,7 @@ def fit_outline(channel: np.ndarray, part_mask: np.ndarray, u_px: float, v_px: f
         shift = shift + step[2:]
         if np.abs(step).max() < 1e-4:
             break
-    rot = _turn(theta)
-    for _ in range(ITERATIONS):  # the shift by matched points, the turn and scale kept
-        placed = scale * template @ rot.T
-        last = shift
-        shift = (seen - placed[gaps(placed + shift).argmin(axis=1)]).mean(axis=0)
-        if np.abs(shift - last).max() < 1e-3:
-            break
-    closest = gaps(scale * template @ rot.T + shift).min(axis=1)
-    rms = float(np.sqrt(np.maximum(closest, 0.0).mean()))
-    turn = math.degrees(theta)
-    if rms > MAX_RMS_PX or not SCALE_RANGE[0] <= scale <= SCALE_RANGE[1] \
-            or abs(turn) > MAX_TURN_DEG:
-        return None
-    return OutlineFit(float(shift[0]), float(shift[1]), turn, scale, rms, len(seen),
-                      tuple((float(u), float(v)) for u, v in template))
+    return theta, scale, shift
 
 
 # The hidden part is drawn at this many times the frame's resolution, then averaged down: its
