@@ -132,6 +132,11 @@ class CellChannels:
                                                    data=_OBJECT_SCHEMA))
                       for topic, name in JSON_CHANNELS.items()}
 
+    def subscribed(self) -> set[str]:
+        """The topics whose channel has a sink (a recording, a subscribed client) now."""
+        return {channel.topic() for channel in (self._image, self._annotations, self._tf,
+                                                *self._json.values()) if channel.has_sinks()}
+
     def close(self) -> None:
         """Close every channel (a WebSocket client sees them unadvertised)."""
         for channel in (self._image, self._annotations, self._tf, *self._json.values()):

@@ -103,6 +103,10 @@ class LiveServer:
         host = f"[{self.address}]" if ":" in self.address else self.address
         return f"ws://{host}:{self.port}"
 
+    def subscribed(self) -> set[str]:
+        """The topics some client is subscribed to now."""
+        return self._channels.subscribed()
+
     def close(self) -> None:
         """Stop the server (clients are disconnected); later calls do nothing."""
         with self._lock:

@@ -11,6 +11,13 @@ jitter_ms is p95 minus median; loop_p95_ratio / loop_max_ratio: under load over 
 --idle-peers connections that send nothing are opened and --aborts positioning jobs are aborted
 mid-move, each ``abort`` through a fresh connection: ``abort_latency_ms`` (p50, p95, max) is the
 round trip, which includes the arm's reply to the halt (up to ``service.abort_wait_s``).
+Then, unless --live-clients is 0, the same positioning jobs with the live view on
+(``service.live``) three times: with no live client, with one client that subscribes to every
+channel and never reads (``controller.service.live_bench``), and with --live-clients clients
+that read everything. ``live`` summarises each phase's loop period (ms from one look's record
+to the next of the same run: grab, perceive, move, the log and the live view's messages);
+``stalled_p95_ratio`` and ``clients_p95_ratio`` are over the phase without clients
+(target: at most 1.1).
 Then, unless --halt-aborts is 0, the same with the real VAL driver during realistic VAL moves
 (``controller.service.halt_bench``: the service in this process on the emulated cell, --idle-peers
 half idle and half byte-a-second peers): ``halted_ms`` (p50, p95, max) is from the abort sent
@@ -83,6 +90,9 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--segment-deg", type=_non_negative, default=SEGMENT_DEG,
                         help="arm.max_segment_deg in the halted_ms phase "
                              f"(default {SEGMENT_DEG:g})")
+    parser.add_argument("--live-clients", type=_count(0), default=20,
+                        help="reading live-view clients in the last live phase (0: no live "
+                             "phases)")
     parser.add_argument("--skip-load", action="store_true",
                         help="only the halted_ms phase (no status flood, no simulated-arm aborts)")
 
@@ -183,13 +193,82 @@ def _iteration_ms(log: Path, run_ids: list[str]) -> list[float]:
     return [ms for run in per_run.values() for ms in run]
 
 
-def _measure(work: Path, clients: int, runs: int, aborts: int, idle_peers: int) -> dict:
+def _period_ms(log: Path, run_ids: list[str]) -> list[float]:
+    """The loop's period: ms from each look's record to the next look's of the same run."""
+    wanted = set(run_ids)
+    times: dict[str, list[float]] = defaultdict(list)
+    for record in read_log(log):
+        if record.get("run_id") in wanted:
+            times[record["run_id"]].append(record["time"])
+    return [(b - a) * 1e3 for run in times.values()
+            for a, b in zip(run, run[1:], strict=False)]
+
+
+def _free_port() -> int:
+    with socket.socket() as probe:
+        probe.bind(("127.0.0.1", 0))
+        return probe.getsockname()[1]
+
+
+def _live_phases(client: ServiceClient, port: int, runs: int, clients: int) -> dict:
+    """The positioning runs of each live phase (none, stalled, clients: their run ids), taken
+    in turns, each offset of OFFSETS once per phase before the next, so that a change in the
+    machine's other load falls on all three alike; and the fewest messages a reading client
+    got in one turn."""
+    from controller.recording.channels import JSON_CHANNELS, TF_TOPIC
+    from controller.service.live_bench import LiveClient
+
+    topics = ("/hand_camera/image", "/hand_camera/annotations", TF_TOPIC, *JSON_CHANNELS)
+    phases: dict = {"none": [], "stalled": [], "clients": [], "messages_per_client": None}
+
+    def position(phase: str, offset: tuple[float, float, float]) -> None:
+        job = client.call("position", timeout_s=None, offset=list(offset), wait=True)["job"]
+        if job["result"] is not None:
+            phases[phase].append(job["result"]["run_id"])
+
+    # one stalled client for the whole bench, subscribed during its phase only: its messages
+    # pile up in the server (up to its queue, then the oldest are dropped) as a hung viewer's
+    stalled = LiveClient(port, topics, reading=False, subscribed=False)
+    try:
+        for _ in range(runs):
+            for offset in OFFSETS:
+                position("none", offset)
+                stalled.subscribe()
+                position("stalled", offset)
+                stalled.unsubscribe()
+                _readers_position(position, port, topics, clients, offset, phases)
+    finally:
+        stalled.close()
+    return phases
+
+
+def _readers_position(position, port: int, topics: tuple[str, ...], clients: int,
+                      offset: tuple[float, float, float], phases: dict) -> None:
+    """One position job of the ``clients`` phase, with ``clients`` reading live clients."""
+    from controller.service.live_bench import LiveClient
+
+    readers: list[LiveClient] = []
+    try:
+        for _ in range(clients):
+            readers.append(LiveClient(port, topics, reading=True))
+        position("clients", offset)
+    finally:
+        for reader in readers:
+            reader.close()
+    fewest = min(reader.messages for reader in readers)
+    phases["messages_per_client"] = min(fewest, phases["messages_per_client"] or fewest)
+
+
+def _measure(work: Path, clients: int, runs: int, aborts: int, idle_peers: int,
+             live_clients: int) -> dict:
     config = work / "finepos.yaml"
     sock = work / "finepos.sock"
+    live_port = _free_port()
     config.write_text(json.dumps({
         "controller": {"paths": {"state_dir": str(work / "state"), "log_dir": str(work / "log")}},
         "service": {"socket_path": str(sock), "max_clients": clients + 4,
-                    "max_clients_per_uid": clients + 4}}))
+                    "max_clients_per_uid": clients + 4,
+                    **({"live": {"port": live_port}} if live_clients else {})}}))
     with socket.socket(socket.AF_UNIX, socket.SOCK_DGRAM) as notify, \
             open(work / "service.log", "wb") as service_log:
         notify.bind(str(work / "notify"))
@@ -216,6 +295,8 @@ def _measure(work: Path, clients: int, runs: int, aborts: int, idle_peers: int) 
                     for thread in threads:
                         thread.join()
                     seconds = time.perf_counter() - t0
+                    live = (_live_phases(client, live_port, runs, live_clients)
+                            if live_clients else None)
                     aborts_ms, halted = _abort_latencies(sock, client, aborts, idle_peers)
             finally:
                 process.send_signal(signal.SIGTERM)
@@ -224,7 +305,7 @@ def _measure(work: Path, clients: int, runs: int, aborts: int, idle_peers: int) 
     log = work / "log" / "iterations.jsonl"
     iteration = {"alone": summarise_ms(_iteration_ms(log, alone)),
                  "under_load": summarise_ms(_iteration_ms(log, loaded))}
-    return {
+    report = {
         "clients": clients, "seconds": seconds, "status_requests": len(all_latencies),
         "status_per_second": len(all_latencies) / seconds,
         "status_latency_ms": summarise_ms(all_latencies),
@@ -237,6 +318,16 @@ def _measure(work: Path, clients: int, runs: int, aborts: int, idle_peers: int) 
         "aborts": {"sent": len(aborts_ms), "halted": halted, "idle_peers": idle_peers},
         "cpu_count": os.cpu_count(),
     }
+    if live is not None:
+        period = {phase: summarise_ms(_period_ms(log, live[phase]))
+                  for phase in ("none", "stalled", "clients")}
+        none_p95 = period["none"].get("p95_ms")
+        report["live"] = {
+            "period_ms": period, "live_clients": live_clients,
+            "messages_per_client": live["messages_per_client"],
+            **{f"{phase}_p95_ratio": (period[phase]["p95_ms"] / none_p95 if none_p95 else None)
+               for phase in ("stalled", "clients")}}
+    return report
 
 
 def _percentiles(values_ms: list[float]) -> dict[str, float]:
@@ -272,7 +363,8 @@ def run(args: argparse.Namespace) -> int:
     report: dict = {}
     if not args.skip_load:
         with tempfile.TemporaryDirectory(prefix="finepos-bench-service-") as tmp:
-            report = _measure(Path(tmp), args.clients, args.runs, args.aborts, args.idle_peers)
+            report = _measure(Path(tmp), args.clients, args.runs, args.aborts, args.idle_peers,
+                              args.live_clients)
     if args.halt_aborts:
         report.update(halted_report(args.halt_aborts, args.idle_peers, args.segment_mm,
                                     args.segment_deg))

@@ -96,6 +96,19 @@ class FoxgloveClient:
             subscriptions.append({"id": sub_id, "channelId": self.channels[topic]["id"]})
         self._ws.send(json.dumps({"op": "subscribe", "subscriptions": subscriptions}))
 
+    def subscribe_on(self, live, topics, timeout_s: float = 5.0) -> None:
+        """Subscribe to ``topics`` and wait until ``live`` (a LiveServer) has them subscribed.
+
+        Raises:
+            TimeoutError: the server did not see the subscription within ``timeout_s``.
+        """
+        self.subscribe(topics)
+        deadline = time.monotonic() + timeout_s
+        while not set(topics) <= live.subscribed():
+            if time.monotonic() > deadline:
+                raise TimeoutError(f"the live view did not see the subscription to {topics}")
+            time.sleep(0.01)
+
     def receive_until(self, done, timeout_s: float = 10.0) -> list[Message]:
         """Read until ``done(messages)`` holds; the messages received.
 

@@ -34,11 +34,10 @@ def _run(recorder) -> None:
     PositioningLoop(arm, cam, LoopConfig(), recorder=recorder).run(TruthEstimator(arm))
 
 
-def _subscribed(live: LiveServer, **options) -> FoxgloveClient:
+def _subscribed(live: LiveServer, topics=TOPICS, **options) -> FoxgloveClient:
     client = FoxgloveClient(live.url, **options)
-    client.wait_channels(TOPICS)
-    client.subscribe(TOPICS)
-    time.sleep(0.2)  # the subscription reaches the server
+    client.wait_channels(topics)
+    client.subscribe_on(live, topics)
     return client
 
 
@@ -54,8 +53,10 @@ def test_a_client_sees_what_the_recording_holds(tmp_path):
 
 
 def test_a_client_that_never_reads_holds_up_neither_the_loop_nor_the_others():
-    with LiveServer(port=0) as live, _subscribed(live, max_queue=1), \
-            _subscribed(live) as watching:
+    # the watching client takes the records only: 300 messages, within its queue however
+    # slowly this test reads them
+    with LiveServer(port=0) as live, _subscribed(live, (ITERATION_TOPIC,)) as watching, \
+            _subscribed(live, max_queue=1):
         started = time.monotonic()
         assert 4 * 300 > BACKLOG_MESSAGES
         for _ in range(100):  # 300 looks, 1200 messages: more than a client's queue holds
@@ -82,3 +83,19 @@ def test_the_live_option_takes_an_optional_port():
     assert parser.parse_args(["--live", "9000"]).live == 9000
     with pytest.raises(SystemExit):
         parser.parse_args(["--live", "70000"])
+
+
+def test_record_and_live_together_tee_one_run(tmp_path, capsys):
+    from controller.commands.common import run_recorder
+
+    args = argparse.Namespace(record=str(tmp_path / "r.mcap"), live=0)
+    with run_recorder(args) as recorder:
+        assert isinstance(recorder, Tee)
+        live = next(r for r in recorder.recorders if isinstance(r, LiveServer))
+        url = live.url
+        with _subscribed(live) as client:
+            _run(recorder)
+            client.receive_until(lambda got: sum(m.topic == ITERATION_TOPIC for m in got) >= 3)
+    assert f"live: {url} (Foxglove" in capsys.readouterr().err
+    with open(tmp_path / "r.mcap", "rb") as f:
+        assert sum(c.topic == ITERATION_TOPIC for _, c, _ in make_reader(f).iter_messages()) == 3

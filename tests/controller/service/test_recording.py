@@ -4,7 +4,6 @@ Foxglove WebSocket client (``service.live``)."""
 from __future__ import annotations
 
 import json
-import time
 
 import pytest
 from mcap.reader import make_reader
@@ -74,8 +73,7 @@ def test_a_foxglove_client_sees_each_look_in_order_on_the_cell_clock(tmp_path, s
         assert channels[ANNOTATIONS_TOPIC]["schemaName"] == "foxglove.ImageAnnotations"
         assert channels[TF_TOPIC]["schemaName"] == "foxglove.FrameTransform"
         assert channels[ITERATION_TOPIC]["encoding"] == "json"
-        live.subscribe(LOOK_TOPICS + (TF_TOPIC,))
-        time.sleep(0.2)  # the subscription reaches the server (the job's first look follows)
+        live.subscribe_on(service._live_view, LOOK_TOPICS + (TF_TOPIC,))
         job = client.call("position", wait=True, max_loops=3)["job"]
         assert job["outcome"] == "done", job
         looks = job["result"]["iterations"] + 1  # every move's look, and the final check
