@@ -40,7 +40,7 @@ from calibration_free.filter2d_reference import Filter2DFeatures
 from calibration_free.localise import DEFAULT_CAMERA_GAMMA
 from calibration_free.perception import Percept, Perception
 from calibration_free.synthetic import SyntheticCell, render, render_dataset
-from calibration_free.training import train_bundle
+from calibration_free.training import TrainingSettings, train_bundle
 from drivers.core.errors import ConfigError, FineposError
 from drivers.core.files import write_json
 
@@ -115,8 +115,8 @@ def measure(n_frames: int, n_opencv_frames: int, seed: int) -> dict:
     nn2_data = render_dataset(cell, grid_offsets(NN2_A_MM, b_deg), rng)
     start = time.perf_counter()
     bundle = train_bundle(nn1_data, nn2_data, object_kind="cube", kappa=KAPPA,
-                          nominal_pose=NOMINAL_POSE, seed=seed, nn1_extra=nn2_data,
-                          edge_gamma=DEFAULT_CAMERA_GAMMA)
+                          nominal_pose=NOMINAL_POSE, nn1_extra=nn2_data,
+                          settings=TrainingSettings(seed=seed, edge_gamma=DEFAULT_CAMERA_GAMMA))
     training_seconds = time.perf_counter() - start
 
     labels = random_offsets(rng, n_frames, NN2_A_MM, b_deg)

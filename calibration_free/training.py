@@ -526,23 +526,49 @@ def nn1_samples(sets: dict[str, Dataset], prep: PreparedSets) -> tuple[np.ndarra
     return uv, labels
 
 
+@dataclass(frozen=True)
+class TrainingSettings:
+    """How a bundle trains: the recipe's perception settings (``controller.recipe``).
+
+    gabor: the filter bank (None: the paper's 36 even filters); nn2_hidden: NN2's hidden layer
+    sizes; seed: seeds NN1 (NN2 uses seed + 1, the full loop's net seed + 2, its correction
+    near the pose seed + 3); polarity: ``bright``, ``dark`` or ``auto``
+    (``prepare_training``); nn1_epochs / nn2_epochs: the Rprop steps (at most);
+    nn2_weight_decay: L2 penalty on NN2's weights (0: none; None: the part's default,
+    ``default_nn2_weight_decay``); nn2_widen_px: NN2 also learns from copies of its ROIs
+    widened on one side by up to this many pixels (``train_nn2``; None: the part's default,
+    ``default_nn2_widen_px``); localisation_channel: ``max``, ``saturation`` or ``auto``
+    (``prepare_training``); fine_axis: for an elongated part (screw, ledge), fit the map from
+    its long axis to the turn near the taught pose (``calibration_free.axis``; False: NN2
+    alone); edge_gamma: the camera's output gamma, with which the part's centre is read from
+    the colour along its edge (``localise.colour_centre``; 0: from the channel's grey levels).
+    """
+
+    gabor: GaborConfig | None = None
+    nn2_hidden: tuple[int, ...] = NN2_HIDDEN
+    seed: int = 0
+    polarity: Polarity | Literal["auto"] = "auto"
+    nn1_epochs: int = NN1_EPOCHS
+    nn2_epochs: int = NN2_EPOCHS
+    nn2_weight_decay: float | None = None
+    nn2_widen_px: float | None = None
+    localisation_channel: Channel | Literal["auto"] = "auto"
+    fine_axis: bool = True
+    edge_gamma: float = 0.0
+
+
 def train_bundle(nn1_data: Dataset, nn2_data: Dataset, *, object_kind: str, kappa: int,
-                 nominal_pose: Pose | Mapping[str, float], gabor: GaborConfig | None = None,
-                 nn2_hidden: tuple[int, ...] = NN2_HIDDEN, seed: int = 0,
-                 nn1_extra: Dataset | None = None, polarity: Polarity | Literal["auto"] = "auto",
-                 nn1_epochs: int = NN1_EPOCHS, nn2_epochs: int = NN2_EPOCHS,
-                 nn2_weight_decay: float | None = None,
-                 localisation_channel: Channel | Literal["auto"] = "auto",
-                 fine_axis: bool = True, edge_gamma: float = 0.0,
-                 nn2_widen_px: float | None = None) -> ModelBundle:
+                 nominal_pose: Pose | Mapping[str, float], nn1_extra: Dataset | None = None,
+                 settings: TrainingSettings = TrainingSettings()) -> ModelBundle:
     """Train NN1 and NN2 from image datasets and pack everything into a ModelBundle.
 
     Steps: the front end (``prepare_training``: intensity statistics of the max-channel
     images, the localisation channel and its Otsu threshold, the area window and shape of the
-    part, the localisation of every image), then NN1 on (u, v) -> (dx, dy), the full loop's
-    translation net on (u, v, sin, cos of kappa dphi), and NN2 on Gabor features -> (sin,
-    cos)(kappa dphi) (``train_nn2``). Images where the object is not found are skipped with a
-    warning and counted.
+    part, the localisation of every image), then the translation nets (``_translation_nets``:
+    NN1 on (u, v) -> (dx, dy), the full loop's translation net on (u, v, sin, cos of kappa
+    dphi) and its correction near the pose), NN2 on Gabor features -> (sin, cos)(kappa dphi)
+    (``train_nn2``) and, for an elongated part, the long axis (``_fine_axis``). Images where
+    the object is not found are skipped with a warning and counted.
 
     Args:
         nn1_data: NN1's set (paper: 3x3x7 grid, a = 25 mm).
@@ -550,28 +576,9 @@ def train_bundle(nn1_data: Dataset, nn2_data: Dataset, *, object_kind: str, kapp
         object_kind: name of the taught object, stored in the bundle.
         kappa: the object's rotational symmetry count.
         nominal_pose: the taught pose.
-        gabor: filter bank; None is the paper's 36 even filters.
-        nn2_hidden: NN2's hidden layer sizes.
-        seed: seeds NN1 (NN2 uses seed + 1, the full loop's net seed + 2).
         nn1_extra: more (u, v) -> (dx, dy) samples for NN1, typically ``nn2_data``, so NN1 is
             precise near the nominal pose, where the positioning loop settles.
-        polarity: "bright", "dark" or "auto" (``training.prepare_training``).
-        nn1_epochs: NN1's Rprop steps (at most).
-        nn2_epochs: NN2's Rprop steps (at most).
-        nn2_weight_decay: L2 penalty on NN2's weights (0 = none; None: the part's default,
-            ``default_nn2_weight_decay(kappa)``).
-        nn2_widen_px: NN2 also learns from copies of its ROIs widened on one side by up to
-            this many pixels (``train_nn2``; 0: none; None: the part's default,
-            ``default_nn2_widen_px(kappa)``).
-        localisation_channel: the image the object is binarised and localised in: "max"
-            (normalised max(R, G, B), the paper's), "saturation" (unchanged by light and
-            shadow for a coloured part on a grey table) or "auto" (whichever separates part
-            and background better on the training images).
-        fine_axis: for an elongated part (screw, ledge), fit the map from its long axis to
-            the turn near the taught pose (``calibration_free.axis``); False: NN2 alone.
-        edge_gamma: the camera's output gamma, with which the part's centre is read from the
-            colour along its edge (``localise.colour_centre``); 0: from the localisation
-            channel's grey levels.
+        settings: how it trains (``TrainingSettings``).
 
     Returns:
         The bundle: the front end (with the taught pose's image position), the networks and
@@ -582,12 +589,15 @@ def train_bundle(nn1_data: Dataset, nn2_data: Dataset, *, object_kind: str, kapp
             sizes differ, a training image is flat, the "object" covers most of the image
             (wrong polarity), or the object is found in fewer than half of a set's images.
     """
+    gabor, nn2_hidden, seed = settings.gabor, settings.nn2_hidden, settings.seed
+    nn2_weight_decay, nn2_widen_px = settings.nn2_weight_decay, settings.nn2_widen_px
     start = time.perf_counter()
     gabor = gabor or GaborConfig()
     pose = check_part(object_kind, kappa, nominal_pose)
     sets = training_sets(nn1_data, nn2_data, nn1_extra)
-    prep = prepare_training(sets, polarity, localisation_channel, edge_gamma)
-    nets = _translation_nets(sets, prep, nn2_data, kappa, seed, nn1_epochs)
+    prep = prepare_training(sets, settings.polarity, settings.localisation_channel,
+                            settings.edge_gamma)
+    nets = _translation_nets(sets, prep, nn2_data, kappa, seed, settings.nn1_epochs)
     if nn2_weight_decay is None:
         nn2_weight_decay = default_nn2_weight_decay(kappa)
     if nn2_widen_px is None:
@@ -596,9 +606,10 @@ def train_bundle(nn1_data: Dataset, nn2_data: Dataset, *, object_kind: str, kapp
             for i in prep.usable["nn2"]]
     nn2_labels = nn2_data.labels[prep.usable["nn2"]]
     nn2 = train_nn2(rois, nn2_labels[:, 2], kappa, gabor, seed=seed,
-                    hidden=nn2_hidden, epochs=nn2_epochs, weight_decay=nn2_weight_decay,
-                    widen_px=nn2_widen_px)
-    axis = _fine_axis(prep, rois, nn2_labels, kappa, gabor.roi_px) if fine_axis else None
+                    hidden=nn2_hidden, epochs=settings.nn2_epochs,
+                    weight_decay=nn2_weight_decay, widen_px=nn2_widen_px)
+    axis = _fine_axis(prep, rois, nn2_labels, kappa, gabor.roi_px) if settings.fine_axis \
+        else None
     training = {
         "seed": seed,
         "samples": {name: len(d) for name, d in sets.items()},

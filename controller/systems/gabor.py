@@ -16,7 +16,7 @@ from calibration_free.bundle import ModelBundle
 from calibration_free.dataset import Dataset
 from calibration_free.perception import Percept, Perception
 from calibration_free.rezero import CLIPPED_WARN_SHARE, rezero
-from calibration_free.training import train_bundle
+from calibration_free.training import TrainingSettings, train_bundle
 from controller.loop.checks import mean_scatter, step_scatter
 from controller.loop.positioning import LoopConfig
 from controller.systems.base import Rezeroed, TrainedModel, VisionSystem
@@ -157,15 +157,15 @@ class GaborSystem(VisionSystem):
               perception_cfg: Any) -> TrainedModel:
         """Train NN1, the full loop's translation net and NN2 (``train_bundle``)."""
         t0 = time.perf_counter()
-        bundle = train_bundle(
-            nn1, nn2, object_kind=state.object_kind, kappa=state.kappa,
-            nominal_pose=state.nominal_pose, gabor=perception_cfg.gabor,
-            nn2_hidden=tuple(perception_cfg.nn2_hidden),
+        settings = TrainingSettings(
+            gabor=perception_cfg.gabor, nn2_hidden=tuple(perception_cfg.nn2_hidden),
             nn2_weight_decay=perception_cfg.nn2_weight_decay,
             nn2_widen_px=perception_cfg.nn2_widen_px,
             localisation_channel=perception_cfg.localisation_channel, seed=perception_cfg.seed,
-            nn1_extra=nn2 if perception_cfg.nn1_uses_nn2_set else None,
             fine_axis=perception_cfg.axis, edge_gamma=perception_cfg.edge_gamma)
+        bundle = train_bundle(nn1, nn2, object_kind=state.object_kind, kappa=state.kappa,
+                              nominal_pose=state.nominal_pose, settings=settings,
+                              nn1_extra=nn2 if perception_cfg.nn1_uses_nn2_set else None)
         return TrainedModel(cls.name, bundle, time.perf_counter() - t0, len(nn1) + len(nn2),
                             bundle.gabor.n_filters)
 

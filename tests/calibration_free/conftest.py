@@ -5,15 +5,15 @@ from __future__ import annotations
 import pytest
 
 from calibration_free.bundle import ModelBundle
-from calibration_free.training import train_bundle
+from calibration_free.training import TrainingSettings, train_bundle
 from tests.synthetic_scene import KAPPA, NOMINAL_POSE  # noqa: F401  (re-exported)
 
 
 def _train(grids, channel: str) -> ModelBundle:
     nn1_data, nn2_data = grids
     return train_bundle(nn1_data, nn2_data, object_kind="cube", kappa=KAPPA,
-                        nominal_pose=NOMINAL_POSE, nn1_extra=nn2_data, seed=0,
-                        localisation_channel=channel)
+                        nominal_pose=NOMINAL_POSE, nn1_extra=nn2_data,
+                        settings=TrainingSettings(seed=0, localisation_channel=channel))
 
 
 @pytest.fixture(scope="session")

@@ -18,6 +18,7 @@ from calibration_free.synthetic import render, render_at
 from calibration_free.training import (
     MIN_NEAR_SAMPLES,
     NN2_WIDEN_COPIES,
+    TrainingSettings,
     default_nn2_weight_decay,
     default_nn2_widen_px,
     near_samples,
@@ -286,7 +287,7 @@ def test_training_refuses_unusable_data(grids):
                      nominal_pose=NOMINAL_POSE)
     with pytest.raises(TrainingError, match="polarity"):
         train_bundle(nn1_data, nn2_data, object_kind="cube", kappa=KAPPA,
-                     nominal_pose=NOMINAL_POSE, polarity="dark")
+                     nominal_pose=NOMINAL_POSE, settings=TrainingSettings(polarity="dark"))
     mostly_empty = nn1_data.images.copy()
     mostly_empty[:40] = mostly_empty[:40, :1, :1]  # table colour only: no object in 40 of 63
     with pytest.raises(TrainingError, match="nn1 image 0 is flat"):
@@ -296,7 +297,8 @@ def test_training_refuses_unusable_data(grids):
     mostly_empty[:40] = np.clip(mostly_empty[:40] + noise, 0, 255).astype(np.uint8)
     with pytest.raises(TrainingError, match="nn1: the object was found in only 23 of 63"):
         train_bundle(Dataset(nn1_data.labels, mostly_empty), nn2_data, object_kind="cube",
-                     kappa=KAPPA, nominal_pose=NOMINAL_POSE, nn1_epochs=5, nn2_epochs=5)
+                     kappa=KAPPA, nominal_pose=NOMINAL_POSE,
+                     settings=TrainingSettings(nn1_epochs=5, nn2_epochs=5))
 
 
 def test_auto_picks_saturation_for_a_coloured_part_on_grey(saturation_bundle, bundle):

@@ -18,7 +18,7 @@ import pytest
 
 from calibration_free.dataset import grid_offsets, staggered_grid_offsets
 from calibration_free.synthetic import SyntheticCell, render, render_dataset
-from calibration_free.training import train_bundle
+from calibration_free.training import TrainingSettings, train_bundle
 from controller.config import config_from_mapping
 from controller.devices import CellDevices
 from controller.service.client import ServiceClient
@@ -238,7 +238,8 @@ def cube_model_files(tmp_path_factory) -> Path:
     nn1 = render_dataset(cell, grid_offsets(25.0, 45.0, (3, 3, 7)), rng)
     nn2 = render_dataset(cell, staggered_grid_offsets(5.0, 45.0, (3, 3, 7)), rng)
     bundle = train_bundle(nn1, nn2, object_kind="cube", kappa=4,
-                          nominal_pose=NOMINAL.as_dict(), nn1_epochs=50, nn2_epochs=50)
+                          nominal_pose=NOMINAL.as_dict(),
+                          settings=TrainingSettings(nn1_epochs=50, nn2_epochs=50))
     bundle.save(folder / "model-gabor.fpm")
     CellState(NOMINAL, "cube", 4, 5.0, 30.0, "test", 0.0).save(folder / "cell.json")
     return folder
@@ -255,7 +256,8 @@ def two_part_model_files(tmp_path_factory, cube_model_files) -> Path:
     nn1 = render_dataset(cell, grid_offsets(25.0, 30.0, (3, 3, 7)), rng)
     nn2 = render_dataset(cell, staggered_grid_offsets(5.0, 30.0, (3, 3, 7)), rng)
     bundle = train_bundle(nn1, nn2, object_kind="nut", kappa=6,
-                          nominal_pose=NOMINAL.as_dict(), nn1_epochs=50, nn2_epochs=50)
+                          nominal_pose=NOMINAL.as_dict(),
+                          settings=TrainingSettings(nn1_epochs=50, nn2_epochs=50))
     (folder / "nut").mkdir()
     bundle.save(folder / "nut" / "model-gabor.fpm")
     CellState(NOMINAL, "nut", 6, 5.0, 24.0, "test", 0.0).save(folder / "nut" / "cell.json")

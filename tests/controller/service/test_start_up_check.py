@@ -8,7 +8,7 @@ from pathlib import Path
 
 import pytest
 
-from calibration_free.training import train_bundle
+from calibration_free.training import TrainingSettings, train_bundle
 from controller.service.client import ServiceError
 from drivers.core.cell_state import CellState
 from tests.mocks.fakes import FakeArm, FakeCamera, FakeWrenchSensor
@@ -24,7 +24,7 @@ def taught(grids, tmp_path_factory):  # noqa: F811  (the fixture imported above)
     folder = tmp_path_factory.mktemp("taught")
     nn1, nn2 = grids
     train_bundle(nn1, nn2, object_kind="cube", kappa=KAPPA, nominal_pose=NOMINAL.as_dict(),
-                 nn1_extra=nn2, seed=0).save(folder / "model-gabor.fpm")
+                 nn1_extra=nn2, settings=TrainingSettings(seed=0)).save(folder / "model-gabor.fpm")
     CellState(NOMINAL, "cube", KAPPA, 5.0, 30.0, "test", 0.0).save(folder / "cell.json")
     return folder
 
