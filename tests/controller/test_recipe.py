@@ -4,14 +4,18 @@ from __future__ import annotations
 
 import json
 import shutil
+from pathlib import Path
 
+import numpy as np
 import pytest
 
 from calibration_free.bundle import ModelBundle
+from calibration_free.synthetic import SyntheticCell, render
 from controller.cli import main
 from controller.config import load_config
 from controller.fine_positioner import FinePositioner
 from controller.recipe import DEFAULT_RECIPE, recipe_of_model
+from controller.systems.gabor import GaborSystem
 from drivers.core.errors import ConfigError
 
 
@@ -81,3 +85,22 @@ def test_a_damaged_stored_recipe_is_named():
     model = type("M", (), {"training": {"recipe": {"perception": {"seed": "x"}}}})()
     with pytest.raises(ConfigError, match="model recipe: perception.seed"):
         recipe_of_model(model)
+
+
+OLD_MODEL = Path(__file__).parent / "data" / "model-gabor-without-recipe.fpm"
+
+
+def test_a_model_file_written_before_recipes_loads_and_runs_with_the_defaults():
+    """A Gabor model file written before the recipe existed (a synthetic cube, trained by
+    the code of 4fd3f9e) loads, reads the recipe's defaults, and reads zero at the taught
+    pose."""
+    model = GaborSystem.load(OLD_MODEL)
+    assert "recipe" not in model.model.training
+    assert recipe_of_model(model.model) == DEFAULT_RECIPE
+    cell = load_config(None)
+    fp = FinePositioner(None, cell, state_dir=OLD_MODEL.parent)
+    assert fp.loop_config(model) == cell.controller.loop
+    estimator = GaborSystem.estimator(model)
+    image = render(SyntheticCell(), np.zeros(3), np.random.default_rng(1))
+    tr = estimator.estimate_translation(image)
+    assert tr.status == "ok" and abs(tr.dx_mm) < 0.3 and abs(tr.dy_mm) < 0.3
