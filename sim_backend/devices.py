@@ -59,9 +59,11 @@ _ANIMATION_STEP_S = 0.02
 # A motion that a condition may stop (``SimArm.move_until``) looks at it this often along its
 # path (mm): at 8 N/mm contact stiffness, 2 N between two looks.
 _WATCH_STEP_MM = 0.25
-# Without timing (``ideal``: nothing is measured in time or force) every 1 mm, so a program's
-# descent stays quick behind the emulators.
+# Without timing (``ideal``: instant, no figure is measured) every 1 mm at a guard speed and
+# every 5 mm at full speed, so a program's descent stays quick behind the emulators, whose
+# camera stream shares the cell.
 _IDEAL_WATCH_STEP_MM = 1.0
+_IDEAL_FAST_WATCH_STEP_MM = 5.0
 # The VAL lines of one guarded descent on the program path, as the VAL driver's defaults send
 # them: two ``do set`` lines of a location (57 characters each), ``ex fpdesc``, the ``*``
 # prompt and the closing prompt (see ``drivers.val.config``).
@@ -217,8 +219,11 @@ class SimArm(Arm):
         speed = min(VAL_SPEED_MAX, max(VAL_SPEED_MIN, self.speed_percent * speed_factor))
         step = start.tool_step_to(target)
         distance = math.hypot(step.dx_mm, step.dy_mm, step.dz_mm)
-        count = max(1, math.ceil(distance / (_WATCH_STEP_MM if timing is not None
-                                             else _IDEAL_WATCH_STEP_MM)))
+        if timing is not None:
+            watch_mm = _WATCH_STEP_MM
+        else:
+            watch_mm = _IDEAL_WATCH_STEP_MM if speed_factor < 0.5 else _IDEAL_FAST_WATCH_STEP_MM
+        count = max(1, math.ceil(distance / watch_mm))
         arm = timing.config.arm if timing is not None else None
         profile_s = joint_motion_s(delta, speed, arm) if arm is not None else 0.0
         t0 = arm.t0_s if arm is not None and setup else 0.0
@@ -418,6 +423,7 @@ class SimWrenchSensor(WrenchSensor):
         self.cell = cell
         self.timing = timing
         self._offset = np.zeros(6)
+        self._mean_rng = np.random.default_rng(0)  # noise of read_mean's averages
 
     def _open(self) -> None:
         _require_open(self.cell, "SimWrenchSensor")
@@ -447,8 +453,10 @@ class SimWrenchSensor(WrenchSensor):
             timing.wait((-timing.clock.now()) % period, "sensor")
             timing.wire(2 * cell_timing.ATI_SA_BYTES + cell_timing.ATI_QR_BYTES,
                         timing.config.ati_baud)
-        readings = [self.cell.wrench() - self._offset for _ in range(samples)]
-        return Wrench(*(float(v) for v in np.mean(readings, axis=0)))
+        # the load at rest plus the mean of ``samples`` noise draws (the contact model once)
+        sigma = self.cell.arm_config.wrench_noise_n / math.sqrt(samples)
+        noise = self._mean_rng.normal(0.0, 1.0, 6) * np.array([sigma] * 3 + [sigma / 10] * 3)
+        return Wrench(*(float(v) for v in self.cell.wrench(noisy=False) + noise - self._offset))
 
     def _bias(self) -> None:
         self._offset = self.cell.wrench()
