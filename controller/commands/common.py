@@ -12,7 +12,6 @@ from controller import simulated
 from controller.config import cell_part, load_config, with_part, with_recipe
 from controller.loop.iteration_log import IterationLog
 from controller.recipe import load_recipe
-from controller.recording.writer import RunRecorder
 from controller.systems.registry import SYSTEMS
 from controller.teach.state_folder import StateFolder
 from drivers.core import parts
@@ -218,12 +217,12 @@ def port_number(text: str) -> int:
 
 def add_live_option(parser: argparse.ArgumentParser) -> None:
     """``--live [PORT]``: serve the run live to Foxglove (WebSocket on 127.0.0.1)."""
-    from controller.recording.live import DEFAULT_PORT
+    from controller.service.config import LIVE_PORT
 
-    parser.add_argument("--live", type=port_number, nargs="?", const=DEFAULT_PORT, metavar="PORT",
+    parser.add_argument("--live", type=port_number, nargs="?", const=LIVE_PORT, metavar="PORT",
                         help="serve the run live for Foxglove (hand camera, overlays, tool pose, "
                              "wrench, iteration records) as a Foxglove WebSocket on 127.0.0.1 "
-                             f"at PORT (default {DEFAULT_PORT}; 0: any free port)")
+                             f"at PORT (default {LIVE_PORT}; 0: any free port)")
 
 
 @contextlib.contextmanager
@@ -246,6 +245,8 @@ def run_recorder(args, max_runs: int | None = None):
                   file=sys.stderr)
             recorders.append(live)
         if path is not None:
+            from controller.recording.writer import RunRecorder
+
             recorders.append(stack.enter_context(RunRecorder(path, max_runs=max_runs)))
             print(f"recording: {path}", file=sys.stderr)
         if len(recorders) > 1:

@@ -17,8 +17,7 @@ import os
 
 from controller.commands.common import add_config_file_option, port_number
 from controller.config import load_config
-from controller.recording.live import DEFAULT_PORT
-from controller.service.config import LiveConfig
+from controller.service.config import LIVE_PORT, LiveConfig
 from controller.service.sd_notify import Notifier
 from controller.service.service import Service
 from controller.service.signals import service_signals
@@ -61,8 +60,8 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--socket", metavar="PATH",
                         help="control socket (default: service.socket_path, "
                              "/run/finepos/finepos.sock)")
-    parser.add_argument("--live", type=port_number, nargs="?", const=DEFAULT_PORT,
+    parser.add_argument("--live", type=port_number, nargs="?", const=LIVE_PORT,
                         metavar="PORT",
                         help="serve every job live for Foxglove (a Foxglove WebSocket on "
                              f"service.live.address, 127.0.0.1 by default) at PORT (default "
-                             f"{DEFAULT_PORT}); overrides service.live.port")
+                             f"{LIVE_PORT}); overrides service.live.port")

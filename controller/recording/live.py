@@ -34,7 +34,6 @@ from drivers.interfaces import Frame, Wrench, WrenchSensor
 
 logger = logging.getLogger(__name__)
 
-DEFAULT_PORT = 8765  # Foxglove's default for a WebSocket connection
 # Messages queued per client: a look is about 4 messages, so a client may lag by some 250 looks
 # before it loses any; a queue holds at most one frame per message (a few kB each).
 BACKLOG_MESSAGES = 1024
@@ -56,7 +55,7 @@ class LiveServer:
             not loopback and there is no token.
     """
 
-    def __init__(self, port: int = DEFAULT_PORT, address: str = "127.0.0.1",
+    def __init__(self, port: int, address: str = "127.0.0.1",
                  token: str | None = None, name: str = "finepos") -> None:
         try:
             gated = not ipaddress.ip_address(address).is_loopback

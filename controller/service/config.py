@@ -47,6 +47,9 @@ class TcpConfig:
             raise ValueError("token_file: must name the token file")
 
 
+LIVE_PORT = 8765  # Foxglove's default for a WebSocket connection
+
+
 @dataclass(frozen=True)
 class LiveConfig:
     """The live view (``service.live``): the cell's channels over the Foxglove WebSocket
@@ -58,7 +61,7 @@ class LiveConfig:
     ``?token=<token>`` in the URL).
     """
 
-    port: int = field(default=8765, metadata={"min": 1, "max": 65535})
+    port: int = field(default=LIVE_PORT, metadata={"min": 1, "max": 65535})
     address: str = "127.0.0.1"
 
     def __post_init__(self) -> None:

@@ -15,8 +15,9 @@ from controller.recording.channels import (
     TF_TOPIC,
     RecordingError,
 )
-from controller.recording.live import BACKLOG_MESSAGES, DEFAULT_PORT, LiveServer, Tee
+from controller.recording.live import BACKLOG_MESSAGES, LiveServer, Tee
 from controller.recording.writer import RunRecorder
+from controller.service.config import LIVE_PORT
 from drivers.core.pose import ToolStep
 from tests.controller.loop.loop_fixtures import NOMINAL, TruthEstimator
 from tests.controller.recording.foxglove_client import FoxgloveClient
@@ -79,7 +80,7 @@ def test_the_live_option_takes_an_optional_port():
     parser = argparse.ArgumentParser()
     add_live_option(parser)
     assert parser.parse_args([]).live is None
-    assert parser.parse_args(["--live"]).live == DEFAULT_PORT
+    assert parser.parse_args(["--live"]).live == LIVE_PORT
     assert parser.parse_args(["--live", "9000"]).live == 9000
     with pytest.raises(SystemExit):
         parser.parse_args(["--live", "70000"])

@@ -60,7 +60,8 @@ def test_serve_under_systemd_protocol(short_dir, notify_socket):
             with ServiceClient(sock, timeout_s=JOB_TIMEOUT_S) as client:
                 for cmd, args in (("acquire", {"set": "nn1"}), ("acquire", {"set": "nn2"}),
                                   ("train", {})):
-                    assert client.call(cmd, wait=True, **args)["job"]["outcome"] == "done"
+                    assert client.call(cmd, timeout_s=JOB_TIMEOUT_S, wait=True,
+                                       **args)["job"]["outcome"] == "done"
                 job = client.call("position", wait=True, offset=[12, -8, 20], max_loops=2)["job"]
                 assert job["outcome"] == "done" and job["result"]["outcome"] == "budget"
                 assert client.call("status")["model"]["system"] == "gabor"
