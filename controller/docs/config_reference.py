@@ -51,10 +51,10 @@ UNITS = (
 # on most cells (docs/configuration.md lists them as advanced).
 OPERATOR_KEYS = (
     "arm.type", "arm.port", "arm.baudrate", "arm.line_ending", "arm.gripper_open_width_mm",
-    "arm.gripper_closed_width_mm",
+    "arm.gripper_closed_width_mm", "arm.programs", "arm.program_input",
     "camera.type", "camera.source",
     "wrench.type", "wrench.port", "wrench.baud", "wrench.counts_per_force",
-    "wrench.counts_per_torque",
+    "wrench.counts_per_torque", "wrench.monitor_output",
     "safety.workspace_min_mm", "safety.workspace_max_mm", "safety.max_step_mm",
     "safety.max_step_deg", "safety.on_violation",
     "controller.part", "controller.paths.state_dir", "controller.paths.log_dir",
