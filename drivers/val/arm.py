@@ -46,6 +46,9 @@ logger = logging.getLogger(__name__)
 
 # Questions answered in one start-up before giving up (the controller keeps asking).
 _MAX_BOOT_QUESTIONS = 8
+# The program editor's prompt for its next line ("  3? "): a link lost while a program was
+# being entered leaves the controller in the editor.
+_EDITOR_LINE = re.compile(r"^\s*\d+\s*\?\s*$")
 # A listed program line: its number, then the instruction.
 _LISTED_LINE = re.compile(r"^\s*\d+\s+(?P<text>.*\S)\s*$")
 # Where the arm stands after a descent that the input stopped at once (mm, deg): the start.
@@ -106,6 +109,14 @@ class ValArm(Arm):
                 self._check(reply, "<wake>")
                 logger.info("VAL monitor ready on %s", self.config.port)
                 return
+            if _EDITOR_LINE.match(reply.message):
+                # the editor, left by a lost link mid-download: end it; the program's
+                # listing then differs and it is entered again
+                answer = self.config.commands.edit_end
+                logger.warning("VAL start-up: the program editor is open (%r); sending %r",
+                               reply.message, answer)
+                reply = self.link.exchange(answer, timeout_s, echo=self.config.echo)
+                continue
             answer = self._boot_answer(reply.message)
             logger.info("VAL start-up: %r -> %r", reply.message, answer)
             reply = self.link.exchange(answer, timeout_s, echo=False)

@@ -197,3 +197,22 @@ def test_connecting_while_a_program_runs_stops_it_first(emulator, backing):
     with program_arm(emulator) as arm:
         assert not session.program_running
         arm.move_tool(ToolStep(dz_mm=1.0))
+
+
+def test_a_connect_that_finds_the_editor_open_ends_it_and_enters_the_program_again(emulator):
+    """A link lost while a program was being entered leaves VAL in the editor: the next
+    connect ends the editor, and the program, listed back short, is entered again."""
+    import serial
+
+    with serial.serial_for_url(emulator.url, timeout=WAIT_S) as raw:
+        raw.write(b"\r")
+        raw.read_until(b".")
+        raw.write(b"edit fpdesc\r")
+        raw.read_until(b"? ")
+        raw.write(b"SPEED 100\r")
+        raw.read_until(b"? ")  # the editor waits for line 2; the link is lost here
+    lines = heard(emulator)
+    with program_arm(emulator) as arm:
+        assert arm.runs_programs
+    assert "e" in lines[:3], lines[:5]  # the editor ended at start-up
+    assert "edit fpdesc" in lines
