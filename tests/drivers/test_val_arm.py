@@ -28,18 +28,6 @@ FAULT_TIMEOUT_S = 0.5
 STEP = ToolStep(2.0, -1.0, 0.5, 3.0)
 
 
-@pytest.fixture
-def backing():
-    with FakeArm() as arm:
-        yield arm
-
-
-@pytest.fixture
-def emulator(backing):
-    with ValEmulator(backing) as emu:
-        yield emu
-
-
 def make_arm(url: str, **overrides) -> ValArm:
     return ValArm(ValConfig(port=url, **overrides), LIMITS)
 

@@ -13,23 +13,10 @@ from drivers.core.pose import ToolStep
 from drivers.safety import SafetyLimits
 from drivers.val import ValArm, ValConfig
 from drivers.val.arm import ProgramDownloadError
-from sim_backend.emulators.val.server import ValEmulator
-from tests.mocks.fakes import HOME, FakeArm
+from tests.mocks.fakes import HOME
 
 LIMITS = SafetyLimits(max_step_mm=60.0, max_step_deg=30.0)
 WAIT_S = 5.0  # bound on waiting for threads; no assertion depends on it
-
-
-@pytest.fixture
-def backing():
-    with FakeArm() as arm:
-        yield arm
-
-
-@pytest.fixture
-def emulator(backing):
-    with ValEmulator(backing) as emu:
-        yield emu
 
 
 def heard(emulator) -> list[str]:
