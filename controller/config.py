@@ -3,9 +3,10 @@
 Sections: ``arm``, ``camera``, ``wrench`` (backend ``type`` plus that backend's options, see
 ``controller.devices``), ``scene`` (the simulated cell), ``safety``, ``controller``,
 ``service`` (``finepos serve``), ``timing`` (the realistic cell's durations,
-``drivers.core.timing``). Unknown keys, wrong types and out-of-range values fail at load with
-the full key path. With no file, every default applies: the simulated cell, good light, the
-cube.
+``drivers.core.timing``), ``parts`` (parts declared beside the built-in ones,
+``drivers.core.parts``; a relative mesh path is taken from the file's folder). Unknown keys,
+wrong types and out-of-range values fail at load with the full key path. With no file, every
+default applies: the simulated cell, good light, the cube.
 
 The perception settings and the loop's tuned keys are not in this file: they are the recipe
 (``controller.recipe``), kept in the model file. A file that sets one is refused with a line
@@ -32,9 +33,8 @@ from controller.loop.positioning import LoopConfig
 from controller.recipe import PerceptionConfig, Recipe, refuse_recipe_keys
 from controller.service.config import ServiceConfig
 from controller.teach.spacenav import TeachConfig
-from controller.teach.state_folder import check_part
+from drivers.core import parts as catalogue
 from drivers.core.errors import ConfigError
-from drivers.core.parts import PartKind
 from drivers.core.timing import TimingConfig
 from drivers.core.typed_config import from_mapping, load_yaml_file
 from drivers.safety import SafetyLimits
@@ -103,13 +103,13 @@ class PathsConfig:
 class ControllerConfig:
     """Config section ``controller``.
 
-    part: the part this cell grasps, from the parts catalogue (``drivers.core.parts``: cube |
-    nut | ledge | screw); teach-in on a real cell takes its symmetry and grasp geometry from
-    there. On the simulated cell the part on the table (``scene.object.kind``) is taught. The
+    part: the part this cell grasps: a built-in part (cube | nut | ledge | screw) or one
+    declared under ``parts``; teach-in on a real cell takes its symmetry and grasp geometry
+    from there. On the simulated cell the part on the table (``scene.object.kind``) is taught. The
     commands' ``--part`` (and a service job's ``part``) overrides both (``with_part``).
     """
 
-    part: PartKind = "cube"
+    part: str = "cube"
     loop: LoopConfig = LoopConfig()
     grasp: GraspConfig = GraspConfig()
     acquisition: AcquisitionConfig = AcquisitionConfig()
@@ -120,10 +120,11 @@ class ControllerConfig:
 @dataclass(frozen=True)
 class FineposConfig:
     """The whole configuration: one field per section, the recipe in use (``perception`` and
-    the recipe keys of ``controller.loop``), and the file it came from.
+    the recipe keys of ``controller.loop``), the parts it knows and the file it came from.
 
     scene: the simulated cell, a ``SceneConfig`` when a device is simulated (else the section
-    unread, ``controller.simulated.UnreadScene``).
+    unread, ``controller.simulated.UnreadScene``); parts: the built-in parts and those the
+    ``parts`` section declares (``drivers.core.parts.Catalogue``).
     """
 
     arm: DeviceSection
@@ -135,19 +136,24 @@ class FineposConfig:
     controller: ControllerConfig = ControllerConfig()
     service: ServiceConfig = ServiceConfig()
     timing: TimingConfig = TimingConfig()
+    parts: catalogue.Catalogue = field(default_factory=lambda: catalogue.PARTS)
     source: str = "<defaults>"
 
 
-SECTIONS = ("arm", "camera", "wrench", "scene", "safety", "controller", "service", "timing")
+SECTIONS = ("arm", "camera", "wrench", "scene", "safety", "controller", "service", "timing",
+            "parts")
 
 
-def config_from_mapping(data: dict[str, Any], source: str = "<mapping>") -> FineposConfig:
+def config_from_mapping(data: dict[str, Any], source: str = "<mapping>",
+                        base_dir: Path | None = None) -> FineposConfig:
     """Validate a whole root mapping (e.g. parsed YAML) into a FineposConfig, with the default
-    recipe.
+    recipe. ``base_dir``: where a declared part's relative mesh path starts (the config file's
+    folder; the working folder without one).
 
     Raises:
-        ConfigError: one line naming the key: unknown, mistyped or out of range, or a recipe
-            key (its home named).
+        ConfigError: one line naming the key: unknown, mistyped or out of range, a recipe
+            key (its home named), a part the gripper cannot grasp, or ``controller.part``
+            naming no known part.
     """
     refuse_recipe_keys(data)
     unknown = sorted(str(k) for k in data if k not in SECTIONS)
@@ -155,14 +161,25 @@ def config_from_mapping(data: dict[str, Any], source: str = "<mapping>") -> Fine
         raise ConfigError(f"{unknown[0]}: unknown section (allowed: {', '.join(SECTIONS)})")
     devices = {kind: parse_device_section(kind, data.get(kind))
                for kind in ("arm", "camera", "wrench")}
+    known = catalogue.PARTS.with_declared(
+        catalogue.declare(data.get("parts"), base_dir, taken=catalogue.PARTS))
+    controller = from_mapping(ControllerConfig, data.get("controller"), "controller")
+    try:
+        known.check(controller.part)
+    except ConfigError as exc:
+        raise ConfigError(f"controller.part: {exc}") from None
+    scene = simulated.scene_section(data.get("scene"),
+                                    any(d.type == "sim" for d in devices.values()))
+    if not isinstance(scene, simulated.UnreadScene) and scene.object.kind not in known:
+        raise ConfigError(f"scene.object.kind: {known.unknown(scene.object.kind)}")
     return FineposConfig(
         **devices,
-        scene=simulated.scene_section(
-            data.get("scene"), any(d.type == "sim" for d in devices.values())),
+        scene=scene,
         safety=from_mapping(SafetyLimits, data.get("safety"), "safety"),
-        controller=from_mapping(ControllerConfig, data.get("controller"), "controller"),
+        controller=controller,
         service=from_mapping(ServiceConfig, data.get("service"), "service"),
         timing=from_mapping(TimingConfig, data.get("timing"), "timing"),
+        parts=known,
         source=source,
     )
 
@@ -172,7 +189,7 @@ def load_config(path: str | Path | None) -> FineposConfig:
     if path is None:
         return config_from_mapping({}, "<defaults>")
     try:
-        return config_from_mapping(load_yaml_file(path), str(path))
+        return config_from_mapping(load_yaml_file(path), str(path), Path(path).parent)
     except ConfigError as exc:
         msg = str(exc)
         raise ConfigError(msg if msg.startswith(str(path)) else f"{path}: {msg}") from exc
@@ -207,9 +224,10 @@ def with_part(config: FineposConfig, kind: str) -> FineposConfig:
     real cell, stays as written).
 
     Raises:
-        ConfigError: ``kind`` is not in the parts catalogue (the message lists the parts).
+        ConfigError: ``kind`` is not in the config's parts (the message lists them and says
+            where to declare a new one).
     """
-    check_part(kind)
+    config.parts.check(kind)
     scene = config.scene
     if not isinstance(scene, simulated.UnreadScene) and scene.object.kind != kind:
         scene = dataclasses.replace(scene, object=dataclasses.replace(scene.object, kind=kind))

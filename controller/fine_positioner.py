@@ -31,9 +31,8 @@ from controller.recipe import Recipe, recipe_of_model, with_recipe_stored
 from controller.systems.base import TrainedModel
 from controller.systems.registry import DEFAULT_SYSTEM, SYSTEMS
 from controller.teach.acquisition import acquire, grid_for, random_set, transfer
-from drivers.core import parts
 from drivers.core.cell_state import CellState
-from drivers.core.errors import FineposError
+from drivers.core.errors import ConfigError, FineposError
 from drivers.core.pose import Pose
 
 logger = logging.getLogger(__name__)
@@ -110,8 +109,11 @@ class FinePositioner:
             part = cell.part
             default_depth = cell.grasp_depth_mm
         else:
-            part = parts.part(self.config.controller.part)
+            part = self.config.parts.part(self.config.controller.part)
             default_depth = part.grasp_depth_mm
+        if part.kappa is None:
+            raise ConfigError(f"parts.{part.kind}.kappa: not declared; declare the part's "
+                              "rotational symmetry (the number of turns that repeat its view)")
         grasp_depth_mm = default_depth if grasp_depth_mm is None else grasp_depth_mm
         object_width_mm = part.grasp_width_mm if object_width_mm is None else object_width_mm
         state = CellState(pose, part.kind, part.kappa, float(grasp_depth_mm),
@@ -311,7 +313,7 @@ class FinePositioner:
         clock = getattr(self.devices, "clock", None)  # cell seconds, for the recording
         sensor = self.devices.wrench if recorder is None else \
             recorder.recording_sensor(self.devices.wrench, clock)
-        weight_n = parts.part(state.object_kind).weight_n  # the taught part's
+        weight_n = self.config.parts.part(state.object_kind).weight_n  # the taught part's
         result = guarded_grasp(self.devices.arm, sensor, state.grasp_depth_mm,
                                state.object_width_mm, self.config.controller.grasp, weight_n,
                                carried, on_carried)

@@ -66,7 +66,7 @@ def build_cell(config, seed: int):
     from sim_backend.cell.sim_cell import SimCell
 
     arm_opts = config.arm.options if config.arm.type == "sim" else SimArmConfig()
-    return SimCell(config.scene, arm_opts, seed=seed)
+    return SimCell(config.scene, arm_opts, seed=seed, parts=config.parts)
 
 
 def cell_timing(config):

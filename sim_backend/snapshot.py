@@ -3,15 +3,18 @@
 Example: finepos sim snapshot --out hand.png --offset 10,-5,20
 
 The cell is built from the ``scene:`` section of --config (defaults without it: the yellow cube,
-good light). The offset DX,DY,DPHI (mm, mm, deg) is a step in the tool frame from the nominal
-pre-grasp pose: DX along the tool's x axis (the way the camera looks: the part then moves down
-in the image), DY along its y axis (the jaw axis), DPHI about the approach axis; write a
-negative first value as --offset=-5,0,0. The image is 192x144 RGB, camera noise included.
+good light); --part NAME puts another part on the table, built-in or declared in the config's
+``parts:`` section (``finepos sim snapshot --config deploy/parts/example.yaml --part bracket
+--out bracket.png``). The offset DX,DY,DPHI (mm, mm, deg) is a step in the tool frame from the
+nominal pre-grasp pose: DX along the tool's x axis (the way the camera looks: the part then
+moves down in the image), DY along its y axis (the jaw axis), DPHI about the approach axis;
+write a negative first value as --offset=-5,0,0. The image is 192x144 RGB, camera noise included.
 """
 
 from __future__ import annotations
 
 import argparse
+import dataclasses
 import logging
 import math
 from pathlib import Path
@@ -20,8 +23,9 @@ import cv2
 
 from drivers.core.errors import ConfigError
 from drivers.core.files import atomic_write_bytes
+from drivers.core.parts import PARTS, Catalogue
 from drivers.core.pose import ToolStep
-from sim_backend.cell.scene_config import SceneConfig, load_scene
+from sim_backend.cell.scene_config import SceneConfig, load_parts, load_scene
 from sim_backend.cell.sim_cell import SimCell
 
 logger = logging.getLogger(__name__)
@@ -63,11 +67,16 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                         metavar="DX,DY,DPHI", help="tool-frame offset from the pre-grasp pose "
                         "(mm, mm, deg; default 0,0,0)")
     parser.add_argument("--seed", type=int, default=0, help="seed of the cell (noise, clutter)")
+    parser.add_argument("--part", metavar="NAME",
+                        help="the part on the table: a built-in one or one the config declares "
+                             "under parts: (default: the scene's, scene.object.kind)")
 
 
-def snapshot(scene: SceneConfig, offset: ToolStep, seed: int = 0):
-    """The hand camera's image (HxWx3 uint8 RGB) at the nominal pose moved by ``offset``."""
-    with SimCell(scene, seed=seed) as cell:
+def snapshot(scene: SceneConfig, offset: ToolStep, seed: int = 0,
+             parts: Catalogue | None = None):
+    """The hand camera's image (HxWx3 uint8 RGB) at the nominal pose moved by ``offset``;
+    ``parts``: the catalogue the scene's part is looked up in (default: the built-in parts)."""
+    with SimCell(scene, seed=seed, parts=parts) as cell:
         cell.move_arm(cell.nominal_grasp_pose().moved_in_tool_frame(offset))
         return cell.render()
 
@@ -76,8 +85,16 @@ def run(args: argparse.Namespace) -> int:
     if args.out.suffix.lower() != ".png":
         raise ConfigError(f"--out: the image is written as PNG, name it *.png (got {args.out})")
     scene = load_scene(args.config) if args.config else SceneConfig()
+    parts = load_parts(args.config) if args.config else PARTS
+    if args.part is not None:
+        if args.part not in parts:
+            raise ConfigError(f"--part: {parts.unknown(args.part)}")
+        scene = dataclasses.replace(scene, object=dataclasses.replace(scene.object,
+                                                                      kind=args.part))
+    elif scene.object.kind not in parts:
+        raise ConfigError(f"{args.config}: scene.object.kind: {parts.unknown(scene.object.kind)}")
     logger.info("scene: %s", scene)
-    image = snapshot(scene, args.offset, args.seed)
+    image = snapshot(scene, args.offset, args.seed, parts)
     ok, data = cv2.imencode(".png", cv2.cvtColor(image, cv2.COLOR_RGB2BGR))
     if not ok:
         raise ConfigError(f"--out: cannot encode the image as PNG for {args.out}")

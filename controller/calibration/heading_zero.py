@@ -63,7 +63,6 @@ from calibration_free.heading_zero import HeadingZero
 from calibration_free.preprocess import frame_means
 from controller.loop.grasp import guarded_grasp
 from controller.systems.estimator import full_step
-from drivers.core import parts
 from drivers.core.pose import Pose, ToolStep, wrap_deg
 from drivers.safety import split_step
 
@@ -149,8 +148,8 @@ class _Turner:
         self.arm, self.grasp_cfg = fp.devices.arm, fp.config.controller.grasp
         self.state, self.taught = state, state.nominal_pose
         self.sign = _turn_sign(self.taught)
-        part = parts.part(state.object_kind)
-        self.kappa, self.weight_n = part.kappa, part.weight_n
+        part = fp.config.parts.part(state.object_kind)
+        self.kappa, self.weight_n = state.kappa, part.weight_n
         self.current = 0.0  # the part's turn from its taught heading
         self.set_downs = 0
 

@@ -24,16 +24,17 @@ from controller.calibration.self_check import (
     self_check,
 )
 from controller.commands.common import (
+    PART_HELP,
     add_config_option,
     add_system_option,
     config_from_args,
+    part_name,
     positive_float,
 )
 from controller.config import cell_part, with_part
 from controller.devices import open_devices
 from controller.fine_positioner import FinePositioner
 from controller.teach.state_folder import StateFolder
-from drivers.core import parts
 from drivers.core.files import write_json
 
 
@@ -42,7 +43,8 @@ def run(args) -> int:
     config = config_from_args(args)
     if args.part is not None:
         config = with_part(config, args.part)
-    folder = StateFolder(args.state_dir or config.controller.paths.state_dir, cell_part(config))
+    folder = StateFolder(args.state_dir or config.controller.paths.state_dir, cell_part(config),
+                         config.parts)
     kind = folder.resolve(args.part, cell_part(config))
     taught = folder.taught()
     # A part not taught, with another one taught: check against that one, so the check fires.
@@ -72,9 +74,10 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.epilog = (f"Defaults: --max-mm {MAX_CORRECTION_MM:g}, --max-deg "
                      f"{MAX_CORRECTION_DEG:g}, --min-similarity {MIN_SIMILARITY:g}.")
     add_config_option(parser)
-    parser.add_argument("--part", metavar="NAME", choices=sorted(parts.PARTS),
-                        help="the part the cell should be set up for (default: controller.part, or "
-                             "the simulated table's); taught on another part fires the check")
+    parser.add_argument("--part", metavar="NAME", type=part_name,
+                        help=f"the part the cell should be set up for: {PART_HELP} (default: "
+                             "controller.part, or the simulated table's); taught on another part "
+                             "fires the check")
     add_system_option(parser)
     parser.add_argument("--max-mm", type=positive_float, default=MAX_CORRECTION_MM,
                         help="largest correction (mm) the model may read at the taught pose")

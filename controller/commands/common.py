@@ -75,29 +75,33 @@ def add_config_option(parser: argparse.ArgumentParser) -> None:
 
 
 def part_name(text: str) -> str:
-    """argparse type: a part of the catalogue (``drivers.core.parts``)."""
-    if text not in parts.PARTS:
-        raise argparse.ArgumentTypeError(f"unknown part {text[:40]!r} (known parts: "
-                                          f"{', '.join(parts.PARTS)})")
+    """argparse type: a part's name (``drivers.core.parts.PART_NAME``); whether the cell knows
+    it is checked once the config, which may declare parts, is loaded (``with_part``)."""
+    if text in parts.RESERVED_NAMES:
+        raise argparse.ArgumentTypeError(f"{text!r} names every part: only finepos evaluate "
+                                          "takes it")
+    if not parts.PART_NAME.fullmatch(text):
+        raise argparse.ArgumentTypeError(
+            f"not a part's name: {text[:40]!r} (built-in parts: {', '.join(parts.PARTS)}; "
+            f"{parts.DECLARE_HINT})")
     return text
 
 
 def part_name_or_all(text: str) -> str:
-    """argparse type: a part of the catalogue, or ``all`` (every part)."""
-    if text == ALL_PARTS:
-        return text
-    if text not in parts.PARTS:
-        raise argparse.ArgumentTypeError(f"unknown part {text[:40]!r} (known parts: "
-                                          f"{', '.join(parts.PARTS)}, or {ALL_PARTS})")
-    return text
+    """argparse type: a part's name, or ``all`` (every part the cell knows)."""
+    return text if text == ALL_PARTS else part_name(text)
+
+
+PART_HELP = (f"{' | '.join(parts.PARTS)} or a part declared under parts: in the config")
 
 
 def add_part_option(parser: argparse.ArgumentParser, default_help: str) -> None:
-    """``--part NAME``: the part of the catalogue the command works on; on the simulated cell
-    that part is also put on the table. ``default_help`` says what applies without it."""
+    """``--part NAME``: the part the command works on (built-in or declared in the config);
+    on the simulated cell that part is also put on the table. ``default_help`` says what
+    applies without it."""
     parser.add_argument("--part", metavar="NAME", type=part_name,
-                        help=f"the part: {' | '.join(parts.PARTS)} (default: {default_help}); "
-                             "on the simulated cell it is put on the table")
+                        help=f"the part: {PART_HELP} (default: {default_help}); on the "
+                             "simulated cell it is put on the table")
 
 
 def add_system_option(parser: argparse.ArgumentParser) -> None:
@@ -132,7 +136,7 @@ def part_setup(args, config, *, teach: bool = False):
         ConfigError: several parts are taught and none is named.
     """
     default = cell_part(config)
-    folder = StateFolder(state_root(args, config), default)
+    folder = StateFolder(state_root(args, config), default, config.parts)
     requested = getattr(args, "part", None)
     kind = (requested or default) if teach else folder.resolve(requested, default)
     return with_part(config, kind), folder.part_dir(kind)

@@ -73,6 +73,7 @@ import sys
 from controller.calibration.rezero import HEADING_ZERO_SYSTEMS, REZERO_SYSTEMS
 from controller.commands.common import (
     ALL_PARTS,
+    PART_HELP,
     add_config_option,
     add_live_option,
     add_recipe_option,
@@ -89,7 +90,6 @@ from controller.evaluation.parts_table import parts_markdown, run_parts_table
 from controller.evaluation.randomized import TRIALS_PER_CELL, evaluate_randomized
 from controller.evaluation.trials import evaluate
 from controller.loop.iteration_log import IterationLog
-from drivers.core import parts
 from drivers.core.errors import ConfigError
 from drivers.core.files import atomic_write_text, write_json
 
@@ -161,7 +161,8 @@ def _evaluate_parts(args, config) -> int:
         raise ConfigError("--hil: not with --part all")
     lightings = (args.lighting,) if args.lighting else ("good", "poor")
     report = run_parts_table(config, system=args.system, trials=args.trials, seed=args.seed,
-                             lightings=lightings, grasp=not args.no_grasp, workers=args.workers,
+                             part_names=tuple(config.parts), lightings=lightings,
+                             grasp=not args.no_grasp, workers=args.workers,
                              progress=not args.quiet, rezero=args.rezero,
                              teach_lighting=args.teach_lighting,
                              rezero_heading_step=args.rezero_heading_step)
@@ -213,8 +214,9 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     add_recipe_option(parser)
     add_system_option(parser)
     parser.add_argument("--part", metavar="NAME", type=part_name_or_all,
-                        help=f"the part: {' | '.join(parts.PARTS)} (default: the scene's), or "
-                             f"{ALL_PARTS}: the parts table (see above)")
+                        help=f"the part: {PART_HELP} (default: the scene's), or "
+                             f"{ALL_PARTS}: the parts table of every part the config knows "
+                             "(see above)")
     parser.add_argument("--lighting", choices=["good", "poor", "dim", "side"],
                         help="override the scene's lighting preset (--part all: only this one "
                              "instead of good and poor)")

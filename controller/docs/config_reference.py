@@ -36,6 +36,7 @@ from controller.devices import REGISTRIES
 from controller.loop.positioning import LoopConfig
 from controller.recipe import RECIPE_LOOP_KEYS, PerceptionConfig
 from drivers.core.files import atomic_write_text
+from drivers.core.parts import PartDeclaration
 from sim_backend.cell.scene_config import SceneConfig
 
 COMMAND = "finepos docs config --out docs/configuration.md"
@@ -73,8 +74,9 @@ OPERATOR_KEYS = (
     "service.tcp.host", "service.record_dir", "service.live", "service.live.port",
     "service.live.address", "service.metrics_port",
     "service.metrics_address", "service.self_check_at_start",
+    "parts.<name>.grasp_width_mm",
 )
-CELL_SECTIONS = ("arm", "camera", "wrench", "safety", "controller", "service")
+CELL_SECTIONS = ("arm", "camera", "wrench", "safety", "controller", "service", "parts")
 SIMULATOR_SECTIONS = ("scene", "timing")
 TIERS = ("operator", "advanced", "recipe", "simulator")
 
@@ -89,6 +91,9 @@ SECTION_NOTES = {
     "safety": "Limits every motion command must respect, applied in one place.",
     "controller": "The part, the positioning loop, the grasp, acquisition, teach-in and paths.",
     "service": "`finepos serve` ([service.md](service.md)).",
+    "parts": "Parts the cell knows beside the built-in cube, nut, ledge and screw, each under "
+             "its name (`parts: {bracket: {mesh: parts/bracket.obj, grasp_width_mm: 12}}`); "
+             "`--part NAME` then takes it ([quickstart.md](quickstart.md#adding-a-part)).",
     "timing": "How long every action of the cell takes: the simulated cell and the emulators "
               "take it, `finepos fit-timing` fits `timing.arm` on a real arm "
               "([simulator.md](simulator.md#timing)).",
@@ -283,6 +288,9 @@ def section_keys(section: str) -> Iterator[Key]:
         return
     if section == "scene":  # a SceneConfig where a device is simulated (controller.simulated)
         yield from keys(SceneConfig, section)
+        return
+    if section == "parts":  # a mapping of names to declarations, built into a Catalogue
+        yield from keys(PartDeclaration, "parts.<name>")
         return
     hints = typing.get_type_hints(FineposConfig, localns={"SceneConfig": SceneConfig})
     yield from keys(hints[section], section)

@@ -43,7 +43,8 @@ def open_hil_devices(config, seed: int = 0, activate: bool = True,
 
     arm_options = config.arm.options if config.arm.type == "sim" else SimArmConfig()
     with contextlib.ExitStack() as stack:
-        cell = stack.enter_context(SimCell(config.scene, arm_options, seed=seed))
+        cell = stack.enter_context(SimCell(config.scene, arm_options, seed=seed,
+                                                   parts=config.parts))
         emulators = stack.enter_context(
             CellEmulators(cell, ati=True, mjpeg_port=0, fps=fps,
                           timing=config.timing if config.scene.timing == "realistic" else None))

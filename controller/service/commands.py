@@ -37,9 +37,10 @@ class Arg:
 
 
 WAIT = Arg(bool, False, help="answer when the job ended (default: when it started)")
-PART = Arg(str, None, choices=tuple(PARTS),
-           help="the part (default: the one taught, else the cell's; teach: the cell's); on "
-                "the simulated cell it is put on the table")
+PART = Arg(str, None, max_chars=32,
+           help=f"the part: {' | '.join(PARTS)} or one declared under parts: in the config "
+                "(default: the one taught, else the cell's; teach: the cell's); on the "
+                "simulated cell it is put on the table")
 
 COMMANDS: dict[str, dict[str, Arg]] = {
     "status": {},
@@ -85,7 +86,7 @@ COMMANDS: dict[str, dict[str, Arg]] = {
     "grasp": {"part": PART, "wait": WAIT},
     "abort": {},
     "reload": {
-        "part": Arg(str, None, choices=tuple(PARTS),
+        "part": Arg(str, None, max_chars=32,
                     help="whose model to load (default: every taught part's)"),
         "system": Arg(str, None, choices=tuple(SYSTEMS),
                       help="model to load (default: the one in use, else gabor)"),

@@ -224,7 +224,7 @@ class Service:
     def _folder(self, config=None) -> StateFolder:
         """The state folder (``config``: default the service's), one sub-folder per part."""
         config = config or self.config
-        return StateFolder(config.controller.paths.state_dir, cell_part(config))
+        return StateFolder(config.controller.paths.state_dir, cell_part(config), config.parts)
 
     def _positioner(self, part: str, config=None) -> FinePositioner:
         """A FinePositioner for ``part`` on the opened devices (``config``: default the
@@ -557,12 +557,13 @@ class Service:
     def _job_part(self, kind: str, requested: str | None) -> str:
         """The part a job works on: ``requested``; else for ``teach`` the cell's (the simulated
         table's, or controller.part), for the others the one taught (the cell's when none is).
-        Raises RequestError ``bad_request`` when several parts are taught and none is named."""
+        Raises RequestError ``bad_request`` for a part the config does not know, or when
+        several parts are taught and none is named."""
         cell = self._cell.cell
         default = cell.object_kind if cell is not None else self.config.controller.part
-        if kind == "teach":
-            return requested or default
         try:
+            if kind == "teach":
+                return self.config.parts.check(requested or default)
             return self._folder().resolve(requested, default)
         except ConfigError as exc:
             raise RequestError("bad_request", str(exc)) from exc

@@ -25,17 +25,6 @@ from drivers.core.errors import ConfigError
 STATE_FILE = "cell.json"
 
 
-def check_part(kind: str) -> str:
-    """``kind`` if the parts catalogue knows it.
-
-    Raises:
-        ConfigError: an unknown part (the message lists the known ones).
-    """
-    if kind not in parts.PARTS:
-        raise ConfigError(f"unknown part {kind[:40]!r} (known parts: {', '.join(parts.PARTS)})")
-    return kind
-
-
 class StateFolder:
     """Where each part's files live under the state folder ``root``.
 
@@ -43,11 +32,15 @@ class StateFolder:
         root: the state folder (``controller.paths.state_dir`` or ``--state-dir``).
         configured_part: the part a single-part folder holds when its ``cell.json`` cannot be
             read (the configured part, ``controller.part``, or the simulated table's).
+        catalogue: the parts the cell knows (the config's ``parts``; default: the built-in
+            ones).
     """
 
-    def __init__(self, root: str | Path, configured_part: str) -> None:
+    def __init__(self, root: str | Path, configured_part: str,
+                 catalogue: parts.Catalogue = parts.PARTS) -> None:
         self.root = Path(root)
         self.configured_part = configured_part
+        self.catalogue = catalogue
 
     def single_part(self) -> str | None:
         """The part of a single-part folder (``cell.json`` at the top), or None without one."""
@@ -58,13 +51,13 @@ class StateFolder:
             kind = CellState.load(path).object_kind
         except StateError:
             return self.configured_part
-        return kind if kind in parts.PARTS else self.configured_part
+        return kind if kind in self.catalogue else self.configured_part
 
     def part_dir(self, kind: str) -> Path:
         """The folder of part ``kind``'s teach-in, datasets and models (which need not exist
         yet): ``root/<kind>``, or ``root`` itself when it is a single-part folder of that part
         and ``root/<kind>`` holds no teach-in."""
-        check_part(kind)
+        self.catalogue.check(kind)
         own = self.root / kind
         if not (own / STATE_FILE).exists() and self.single_part() == kind:
             return self.root
@@ -75,7 +68,7 @@ class StateFolder:
         single = self.single_part()
         return {kind: (self.root / kind if (self.root / kind / STATE_FILE).exists()
                        else self.root)
-                for kind in parts.PARTS
+                for kind in self.catalogue
                 if (self.root / kind / STATE_FILE).exists() or kind == single}
 
     def resolve(self, requested: str | None, default: str) -> str:
@@ -86,14 +79,14 @@ class StateFolder:
             ConfigError: an unknown part, or several parts taught and none named.
         """
         if requested is not None:
-            return check_part(requested)
+            return self.catalogue.check(requested)
         taught = list(self.taught())
         if len(taught) == 1:
             return taught[0]
         if len(taught) > 1:
             raise ConfigError(f"{self.root}: several parts are taught ({', '.join(taught)}); "
                               "name one with --part")
-        return check_part(default)
+        return self.catalogue.check(default)
 
     def folders(self) -> list[Path]:
         """Every folder the state is written into (for the clean-up of interrupted writes):

@@ -14,6 +14,7 @@ import stat
 import sys
 import types
 import typing
+from collections.abc import Mapping
 from pathlib import Path
 from typing import Any, Literal, TypeVar, Union
 
@@ -107,7 +108,7 @@ def to_mapping(obj: Any) -> Any:
         return {f.name: to_mapping(getattr(obj, f.name)) for f in dataclasses.fields(obj)}
     if isinstance(obj, (list, tuple)):
         return [to_mapping(v) for v in obj]
-    if isinstance(obj, dict):
+    if isinstance(obj, Mapping):
         return {k: to_mapping(v) for k, v in obj.items()}
     return obj
 

@@ -1,4 +1,7 @@
-"""The geometry of the catalogue's parts (``drivers.core.parts``), in one registry (``PARTS``).
+"""The geometry of the catalogue's parts (``drivers.core.parts``) in the simulated cell.
+
+The built-in parts' meshes are built here (``PARTS``); a declared part's comes from its mesh
+file (``sim_backend.cell.mesh_files``). ``spec_for`` gives any catalogue entry's.
 
 Each part is meshed in its resting pose in a part frame whose origin lies on the table under
 the grasp point, z up; the jaws close along the part's y axis, so the nominal tool x axis is the
@@ -9,6 +12,7 @@ sees it (the image repeats every 360/kappa deg), which is also the period of its
 from __future__ import annotations
 
 import dataclasses
+import functools
 import math
 from collections.abc import Callable
 from dataclasses import dataclass
@@ -16,15 +20,19 @@ from functools import cached_property
 
 import numpy as np
 
-from drivers.core.parts import CUBE_EDGE_MM, SCREW_SHANK_RADIUS_MM, Part
+from drivers.core.errors import ConfigError
 from drivers.core.parts import PARTS as CATALOGUE
+from drivers.core.parts import Part
 from drivers.core.pose import rot_y, rot_z
-from sim_backend.cell import meshes
+from sim_backend.cell import mesh_files, meshes
 from sim_backend.cell.meshes import Mesh
 
-# Friction coefficient of each material of the parts (a judgement: wood on a painted table
-# top; the finger pads' own friction is in ``grasp_physics``).
-MATERIAL_FRICTION = {"wood": 0.5}
+# Friction coefficient of each material of the parts with a painted table top (a judgement,
+# from handbook values for dry contact; the finger pads' own friction is in ``grasp_physics``).
+MATERIAL_FRICTION = {"wood": 0.5, "plastic": 0.4, "metal": 0.3}
+
+CUBE_EDGE_MM = 30.0
+SCREW_SHANK_RADIUS_MM = 5.5
 
 
 @dataclass(frozen=True)
@@ -38,11 +46,13 @@ class Cylinder:
 
 @dataclass(frozen=True)
 class PartGeometry:
-    """The visual mesh and the collision shape: the given cylinders, or when there are none
-    the convex hull of the mesh."""
+    """The visual mesh and the collision shape: the given cylinders, or the convex pieces
+    ``hulls_obj`` (OBJ text, mm, part frame), or when there are neither the convex hull of
+    the mesh."""
 
     mesh: Mesh
     cylinders: tuple[Cylinder, ...] = ()
+    hulls_obj: str | None = None
 
 
 @dataclass(frozen=True)
@@ -50,7 +60,7 @@ class PartSpec(Part):
     """One kind of part in the simulated cell: its catalogue entry (every field of
     ``drivers.core.parts.Part``) and ``build``, which makes its geometry (mm, part frame)."""
 
-    build: Callable[[], PartGeometry]
+    build: Callable[[], PartGeometry] = dataclasses.field(kw_only=True)
 
     @cached_property
     def geometry(self) -> PartGeometry:
@@ -64,6 +74,15 @@ class PartSpec(Part):
     def friction(self) -> float:
         """Coulomb friction of the part's material (with the table and the finger pads)."""
         return MATERIAL_FRICTION[self.material]
+
+    @cached_property
+    def symmetry(self) -> int:
+        """The part's rotational symmetry about the vertical: the declared kappa, else the
+        mesh's own (``mesh_files.rotational_symmetry``: the simulator's ground truth, which
+        teach-in does not read; it finds kappa from images)."""
+        if self.kappa is not None:
+            return self.kappa
+        return mesh_files.rotational_symmetry(self.mesh.vertices_mm)
 
     @cached_property
     def height_mm(self) -> float:
@@ -126,8 +145,37 @@ def _screw() -> PartGeometry:
          Cylinder(SCREW_SHANK_RADIUS_MM, SCREW_SHANK_LENGTH_MM, place @ shank)))
 
 
+def _from_file(part: Part) -> PartGeometry:
+    loaded = mesh_files.load_part_mesh(part.mesh_file, part.mesh_scale, f"parts.{part.kind}.mesh")
+    return PartGeometry(loaded.mesh, hulls_obj=loaded.hulls_obj)
+
+
 _BUILDERS: dict[str, Callable[[], PartGeometry]] = {
     "cube": _cube, "nut": _nut, "ledge": _ledge, "screw": _screw,
 }
-PARTS: dict[str, PartSpec] = {kind: PartSpec(**dataclasses.asdict(part), build=_BUILDERS[kind])
-                              for kind, part in CATALOGUE.items()}
+
+
+@functools.lru_cache(maxsize=64)
+def spec_for(part: Part) -> PartSpec:
+    """The simulated cell's part for catalogue entry ``part``: a built-in part's built mesh,
+    or a declared part's mesh file (read and checked once, on first use of its geometry).
+
+    Raises:
+        ConfigError: a declared part without a mesh file, or a material the simulated cell
+            has no friction for.
+    """
+    if part.material not in MATERIAL_FRICTION:
+        raise ConfigError(f"parts.{part.kind}.material: the simulated cell knows "
+                          f"{' | '.join(MATERIAL_FRICTION)}, got {part.material!r}")
+    if part.mesh_file is not None:
+        build = functools.partial(_from_file, part)
+    elif part.kind in _BUILDERS and CATALOGUE.get(part.kind) == part:
+        build = _BUILDERS[part.kind]
+    else:
+        raise ConfigError(f"parts.{part.kind}.mesh: the simulated cell needs the part's mesh "
+                          "file (STL, OBJ or PLY, in mm)")
+    return PartSpec(**{f.name: getattr(part, f.name) for f in dataclasses.fields(Part)},
+                    build=build)
+
+
+PARTS: dict[str, PartSpec] = {kind: spec_for(part) for kind, part in CATALOGUE.items()}

@@ -13,8 +13,8 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Literal
 
+from drivers.core import parts as catalogue
 from drivers.core.errors import ConfigError
-from drivers.core.parts import PartKind
 from drivers.core.timing import TimingMode
 from drivers.core.typed_config import from_mapping, load_yaml_file
 
@@ -29,12 +29,15 @@ MAX_EXTRA_LAMPS = 4  # each further lamp costs a render and a shadow map per fra
 class ObjectConfig:
     """The part to grasp: its kind, colour (RGB 0..1) and where it lies on the table.
 
+    kind: a built-in part (cube | nut | ledge | screw) or one the cell config declares under
+    ``parts``; color: the colour the part is painted in (the same for every part unless set).
+
     x_mm, y_mm: position in the robot's base frame; phi_deg: rotation about the vertical.
     The ranges keep the pre-grasp pose, 30 mm around it at any rotation and the grasp itself
     within the arm's reach.
     """
 
-    kind: PartKind = "cube"
+    kind: str = "cube"
     color: tuple[float, float, float] = field(default=(1.0, 0.85, 0.1), metadata=_UNIT_RANGE)
     x_mm: float = field(default=300.0, metadata={"min": 220.0, "max": 340.0})
     y_mm: float = field(default=0.0, metadata={"min": -100.0, "max": 100.0})
@@ -288,3 +291,19 @@ def load_scene(path: str | Path) -> SceneConfig:
         return from_mapping(SceneConfig, data.get("scene"), "scene")
     except ConfigError as exc:
         raise ConfigError(f"{path}: {exc}") from exc
+
+
+def load_parts(path: str | Path) -> catalogue.Catalogue:
+    """The parts the root config file ``path`` knows: the built-in ones and those its
+    ``parts`` section declares (relative mesh paths from the file's folder).
+
+    Raises:
+        ConfigError: naming the file and the key's full path.
+    """
+    data = load_yaml_file(path)
+    try:
+        declared = catalogue.declare(data.get("parts"), Path(path).parent,
+                                     taken=catalogue.PARTS)
+    except ConfigError as exc:
+        raise ConfigError(f"{path}: {exc}") from exc
+    return catalogue.PARTS.with_declared(declared)

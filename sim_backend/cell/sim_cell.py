@@ -17,12 +17,15 @@ from __future__ import annotations
 
 import logging
 import math
+import tempfile
 from dataclasses import dataclass
+from pathlib import Path
 
 import numpy as np
 
 from drivers.core.errors import MotionRejectedError
-from drivers.core.parts import APPROACH_HEIGHT_MM
+from drivers.core.parts import APPROACH_HEIGHT_MM, Catalogue
+from drivers.core.parts import PARTS as CATALOGUE
 from drivers.core.pose import Pose, rot_y, rot_z, wrap_deg
 from sim_backend.cell import (
     contact,
@@ -35,7 +38,7 @@ from sim_backend.cell import (
     textures,
 )
 from sim_backend.cell.lighting import Light, resolve_light
-from sim_backend.cell.objects import PARTS, PartSpec
+from sim_backend.cell.objects import PARTS, PartSpec, spec_for
 from sim_backend.cell.pybullet_quiet import p
 from sim_backend.cell.robot_model import FINGER_LINKS, TOOL_LENGTH_MM
 from sim_backend.cell.scene_config import (
@@ -150,10 +153,17 @@ class SimCell:
         seed: seeds the clutter layout, the occluder's side, the repeatability errors, the
             camera and the wrench noise; a given seed gives the same images (apart from the
             camera noise's own sequence, which is also seeded).
+        parts: the parts catalogue ``scene.object.kind`` is looked up in (the cell config's,
+            with its declared parts; default: the built-in parts). Clutter is drawn from the
+            built-in parts.
+
+    Raises:
+        ConfigError: an unknown part, or a declared part's mesh file that cannot be used
+            (one line naming the key, ``sim_backend.cell.mesh_files``).
     """
 
     def __init__(self, scene: SceneConfig, arm: SimArmConfig = DEFAULT_ARM,
-                 seed: int = 0) -> None:
+                 seed: int = 0, parts: Catalogue | None = None) -> None:
         self.scene = scene
         self.arm_config = arm
         self.seed = seed
@@ -163,7 +173,7 @@ class SimCell:
         self._motion_rng = np.random.default_rng(motion)
         self._noise_rng = np.random.default_rng(noise)
         self._wrench_rng = np.random.default_rng(wrench)
-        self.part: PartSpec = PARTS[scene.object.kind]
+        self.part: PartSpec = spec_for((parts or CATALOGUE).part(scene.object.kind))
         self.light: Light = resolve_light(scene.lighting)
         self.camera_model = optics.resolve_camera(scene.camera)
         self._optics = (None if self.camera_model.ideal
@@ -272,7 +282,9 @@ class SimCell:
         cid = self._client
         visual = robot_model.visual_shape(spec.mesh, cid, [*color, 1.0])
         cylinders = spec.geometry.cylinders
-        if cylinders:
+        if spec.geometry.hulls_obj is not None:
+            collision = self._hulls_shape(spec.geometry.hulls_obj)
+        elif cylinders:
             collision = p.createCollisionShapeArray(
                 shapeTypes=[p.GEOM_CYLINDER] * len(cylinders),
                 radii=[c.radius_mm / 1000.0 for c in cylinders],
@@ -289,6 +301,15 @@ class SimCell:
         p.changeDynamics(body, -1, collisionMargin=0.0, physicsClientId=cid)
         p.changeVisualShape(body, -1, textureUniqueId=self._shading, physicsClientId=cid)
         return body
+
+    def _hulls_shape(self, hulls_obj: str) -> int:
+        """A compound collision shape of the convex pieces in ``hulls_obj`` (OBJ text, mm):
+        PyBullet makes one convex hull of each object of an OBJ file."""
+        with tempfile.TemporaryDirectory(prefix="finepos-hulls-") as tmp:
+            path = Path(tmp) / "hulls.obj"
+            path.write_text(hulls_obj, encoding="utf-8")
+            return p.createCollisionShape(p.GEOM_MESH, fileName=str(path),
+                                          meshScale=[1e-3] * 3, physicsClientId=self._client)
 
     def _build_occluder(self) -> _Item:
         """A flat card lying over one end of the part (the seed picks which; a screw: its head
@@ -376,7 +397,9 @@ class SimCell:
 
     @property
     def kappa(self) -> int:
-        return self.part.kappa
+        """The part's true rotational symmetry (``PartSpec.symmetry``): what the cell's own
+        errors are wrapped by."""
+        return self.part.symmetry
 
     @property
     def approach_height_mm(self) -> float:
@@ -444,7 +467,7 @@ class SimCell:
         return math.degrees(math.atan2(pose[1, 0], pose[0, 0]))
 
     def _nominal_heading_deg(self, part_pose: np.ndarray) -> float:
-        period = 360.0 / self.part.kappa
+        period = 360.0 / self.part.symmetry
         phi = self._heading_of(part_pose)
         return REFERENCE_HEADING_DEG + wrap_deg(phi - REFERENCE_HEADING_DEG, period)
 
@@ -465,7 +488,7 @@ class SimCell:
         """(ex_mm, ey_mm, ephi_deg): where the gripper really is relative to the nominal pose,
         in the nominal tool frame, ephi wrapped into (-180/kappa, 180/kappa]."""
         step = self.nominal_grasp_pose().tool_step_to(self.true_tool_pose())
-        return step.dx_mm, step.dy_mm, wrap_deg(step.dphi_deg, 360.0 / self.part.kappa)
+        return step.dx_mm, step.dy_mm, wrap_deg(step.dphi_deg, 360.0 / self.part.symmetry)
 
     # -- the arm ------------------------------------------------------------------------------
     def arm_pose(self) -> Pose:
@@ -647,7 +670,7 @@ class SimCell:
             "along_mm": float(part_in_tool[0, 3]),
             "height_mm": float(part_in_tool[2, 3] - grip_z),
             "phi_deg": wrap_deg(math.degrees(math.atan2(rel[1, 0], rel[0, 0])),
-                                360.0 / self.part.kappa),
+                                360.0 / self.part.symmetry),
             "tilt_deg": math.degrees(math.acos(float(np.clip(rel[2, 2], -1.0, 1.0)))),
         }
 

@@ -127,3 +127,76 @@ def test_a_partial_nn2_grid_keeps_nn2s_defaults():
     nn2 = config.controller.acquisition.nn2
     assert (nn2.a_mm, nn2.staggered, nn2.shape) == (5.0, True, (3, 3, 3))
     assert config.controller.acquisition.nn1.a_mm == 25.0
+
+
+BRACKET = {"mesh": "parts/bracket.obj", "grasp_width_mm": 12.0, "grip_below_top_mm": 8.0,
+           "jaw_opening_mm": 16.0, "mass_g": 20.0, "material": "wood",
+           "color": [0.8, 0.3, 0.2], "kappa": 2}
+
+
+def test_a_declared_part_joins_the_built_in_ones_with_its_mesh_beside_the_file(tmp_path):
+    path = tmp_path / "cell" / "finepos.yaml"
+    path.parent.mkdir()
+    path.write_text("parts:\n  bracket: {mesh: parts/bracket.obj, grasp_width_mm: 12.0,\n"
+                    "            jaw_opening_mm: 16.0, kappa: 2}\n"
+                    "controller: {part: bracket}\nscene: {object: {kind: bracket}}\n")
+    cfg = load_config(path)
+    assert list(cfg.parts) == ["cube", "nut", "ledge", "screw", "bracket"]
+    bracket = cfg.parts["bracket"]
+    assert bracket.mesh_file == str(tmp_path / "cell" / "parts" / "bracket.obj")
+    assert (bracket.kappa, bracket.grasp_width_mm, bracket.jaw_opening_mm) == (2, 12.0, 16.0)
+    assert cfg.controller.part == "bracket" and cfg.scene.object.kind == "bracket"
+    assert with_part(cfg, "nut").scene.object.kind == "nut"
+    assert load_config(None).parts == config_from_mapping({}).parts  # the built-in four
+
+
+def test_a_declaration_gives_the_issue_examples_fields_and_defaults_the_rest():
+    part = config_from_mapping({"parts": {"bracket": BRACKET}}).parts["bracket"]
+    assert (part.grip_below_top_mm, part.mass_g, part.material, part.color) == \
+        (8.0, 20.0, "wood", (0.8, 0.3, 0.2))
+    pin = config_from_mapping({"parts": {"pin": {"grasp_width_mm": 6.0}}}).parts["pin"]
+    assert pin.kappa is None and pin.jaw_opening_mm == 9.0 and pin.mesh_file is None
+
+
+@pytest.mark.parametrize("declared,message", [
+    ({"jaw_opening_mm": 45.0}, "parts.bracket.jaw_opening_mm: 45 mm is over the gripper's "
+                               "40 mm opening"),
+    ({"grasp_width_mm": 16.0}, "parts.bracket.grasp_width_mm: 16 mm is not below the jaw "
+                               "opening, 16 mm"),
+    ({"grasp_width_mm": 39.0, "jaw_opening_mm": None},
+     "parts.bracket.jaw_opening_mm: 42 mm is over the gripper's 40 mm opening"),
+    ({"kappa": 0}, "parts.bracket.kappa: must be >= 1"),
+    ({"material": "glass"}, "parts.bracket.material: must be one of wood | plastic | metal"),
+    ({"colour": [1, 0, 0]}, "parts.bracket.colour: unknown key"),
+])
+def test_a_bad_declaration_names_the_value_and_the_limit(declared, message):
+    with pytest.raises(ConfigError) as info:
+        config_from_mapping({"parts": {"bracket": {**BRACKET, **declared}}})
+    assert str(info.value) == message or str(info.value).startswith(message)
+    assert "\n" not in str(info.value)
+
+
+@pytest.mark.parametrize("parts,message", [
+    ({"cube": {"grasp_width_mm": 10.0}}, "parts.cube: the name of a built-in part"),
+    ({"all": {"grasp_width_mm": 10.0}}, "parts.all: a part's name is"),
+    ({"Big Part": {"grasp_width_mm": 10.0}}, "parts.Big Part: a part's name is"),
+    ({"pin": {"mesh": "pin.stl"}}, "parts.pin.grasp_width_mm: required"),
+    ({"pin": "small"}, "parts.pin: expected a mapping"),
+    (["pin"], "parts: expected a mapping of part names to parts"),
+])
+def test_bad_part_names_and_entries_are_refused(parts, message):
+    with pytest.raises(ConfigError, match="^" + message.replace("(", r"\(")):
+        config_from_mapping({"parts": parts})
+
+
+def test_an_unknown_part_lists_the_known_ones_and_where_to_declare():
+    with pytest.raises(ConfigError) as info:
+        config_from_mapping({"controller": {"part": "bolt"}})
+    assert str(info.value) == (
+        "controller.part: unknown part 'bolt' (known parts: cube, nut, ledge, screw; declare "
+        "a new one under parts: in the cell config, docs/quickstart.md#adding-a-part)")
+    with pytest.raises(ConfigError, match=r"^scene.object.kind: unknown part 'sphere'"):
+        config_from_mapping({"scene": {"object": {"kind": "sphere"}}})
+    with pytest.raises(ConfigError, match=r"^unknown part 'bolt' \(known parts: cube, nut, "
+                                          r"ledge, screw, pin;"):
+        with_part(config_from_mapping({"parts": {"pin": {"grasp_width_mm": 6.0}}}), "bolt")

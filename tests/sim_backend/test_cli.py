@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import argparse
 import json
+from pathlib import Path
 
 import cv2
 import pytest
@@ -30,7 +31,18 @@ def test_snapshot_reports_a_bad_config_with_its_key_path(tmp_path, capsys):
     config.write_text("scene:\n  object: {kind: sphere}\n")
     assert main(["sim", "snapshot", "--config", str(config), "--out",
                  str(tmp_path / "x.png")]) == 2
-    assert "scene.object.kind: must be one of" in capsys.readouterr().err
+    assert "bad.yaml: scene.object.kind: unknown part 'sphere' (known parts: cube, nut, " \
+           "ledge, screw; declare" in capsys.readouterr().err
+
+
+def test_snapshot_shows_a_part_declared_in_the_config(tmp_path, capsys):
+    example = Path(__file__).resolve().parents[2] / "deploy" / "parts" / "example.yaml"
+    out = tmp_path / "bracket.png"
+    assert main(["sim", "snapshot", "--config", str(example), "--part", "bracket", "--out",
+                 str(out)]) == 0
+    assert cv2.imread(str(out)).shape == (144, 192, 3)
+    assert main(["sim", "snapshot", "--part", "bracket", "--out", str(out)]) == 2
+    assert "--part: unknown part 'bracket'" in capsys.readouterr().err
 
 
 @pytest.mark.parametrize("text, message", [

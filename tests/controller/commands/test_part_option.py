@@ -28,16 +28,23 @@ def _subparsers(parser: argparse.ArgumentParser) -> dict[str, argparse.ArgumentP
 
 
 @pytest.mark.parametrize("command", PART_COMMANDS)
-def test_every_part_command_takes_part_and_refuses_an_unknown_one(command, capsys):
+def test_every_part_command_takes_part_and_refuses_an_unknown_one(command, tmp_path, capsys):
     parser = _subparsers(cli.build_parser())[command]
     option = next(a for a in parser._actions if "--part" in a.option_strings)
     assert option.type("nut") == "nut"
-    required = {"acquire": ["--set", "nn1"], "table1": ["--out", "x"]}.get(command, [])
+    required = {"acquire": ["--set", "nn1"], "table1": ["--out", str(tmp_path / "t")]}.get(
+        command, [])
     with pytest.raises(SystemExit) as exited:
-        cli.build_parser().parse_args([command, *required, "--part", "bolt"])
+        cli.build_parser().parse_args([command, *required, "--part", "../etc"])
     assert exited.value.code == 2
     last = capsys.readouterr().err.strip().splitlines()[-1]
-    assert "unknown part 'bolt' (known parts: cube, nut, ledge, screw" in last
+    assert "not a part's name: '../etc' (built-in parts: cube, nut, ledge, screw; declare" in last
+    state = [] if command == "table1" else ["--state-dir", str(tmp_path)]
+    assert cli.main([command, *required, *state, "--part", "bolt"]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert err[-1].endswith("unknown part 'bolt' (known parts: cube, nut, ledge, screw; declare "
+                            "a new one under parts: in the cell config, "
+                            "docs/quickstart.md#adding-a-part)")
 
 
 @pytest.mark.parametrize("command", CTL_JOB_COMMANDS)
@@ -45,14 +52,25 @@ def test_every_ctl_job_command_takes_part(command):
     args = cli.build_parser().parse_args(["ctl", command, "--part", "ledge"]
                                          + (["--set", "nn1"] if command == "acquire" else []))
     assert args.part == "ledge"
-    with pytest.raises(SystemExit):
-        cli.build_parser().parse_args(["ctl", command, "--part", "bolt"])
+    args = cli.build_parser().parse_args(["ctl", command, "--part", "bracket"]
+                                         + (["--set", "nn1"] if command == "acquire" else []))
+    assert args.part == "bracket"  # a declared part: the service checks it against its config
 
 
 def test_only_evaluate_takes_all():
     assert cli.build_parser().parse_args(["evaluate", "--part", "all"]).part == "all"
     with pytest.raises(SystemExit):
         cli.build_parser().parse_args(["position", "--part", "all"])
+
+
+def test_a_declared_part_is_taken_wherever_a_built_in_one_is(tmp_path):
+    config = config_from_mapping({"parts": {"pin": {"grasp_width_mm": 6.0, "kappa": 2}}})
+    part_config, folder = part_setup(_args(tmp_path, "pin"), config)
+    assert folder == tmp_path / "pin"
+    assert part_config.controller.part == "pin" and part_config.scene.object.kind == "pin"
+    with pytest.raises(ConfigError, match=r"unknown part 'pin' \(known parts: cube, nut, "
+                                          r"ledge, screw; declare"):
+        part_setup(_args(tmp_path, "pin"), load_config(None))
 
 
 def _args(tmp_path, part=None):

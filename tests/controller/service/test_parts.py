@@ -81,7 +81,8 @@ def test_a_job_for_a_part_not_taught_fails_and_names_it(tmp_path, short_dir,
         job = client.call("position", wait=True, part="screw")["job"]
         assert job["outcome"] == "failed" and "screw" in job["reason"], job
         assert "no cell state yet" in job["reason"]
-        with pytest.raises(ServiceError, match="part: one of cube, nut, ledge, screw"):
+        with pytest.raises(ServiceError, match=r"unknown part 'bolt' \(known parts: cube, nut, "
+                                               r"ledge, screw; declare"):
             client.call("position", part="bolt")
         assert client.call("status")["state"] == "idle"
 

@@ -5,9 +5,10 @@ from __future__ import annotations
 
 import pytest
 
-from controller.teach.state_folder import StateFolder, check_part
+from controller.teach.state_folder import StateFolder
 from drivers.core.cell_state import CellState
 from drivers.core.errors import ConfigError
+from drivers.core.parts import PARTS, declare
 from drivers.core.pose import Pose
 
 POSE = Pose(300.0, 0.0, 150.0, -90.0, 90.0, 0.0)
@@ -46,13 +47,24 @@ def test_the_part_is_the_named_one_else_the_one_taught_else_the_cells(tmp_path):
     assert "\n" not in message
 
 
-def test_an_unknown_part_is_refused_listing_the_known_ones(tmp_path):
+def test_an_unknown_part_is_refused_listing_the_known_ones_and_where_to_declare(tmp_path):
     with pytest.raises(ConfigError, match=r"unknown part 'bolt' \(known parts: cube, nut, "
-                                          r"ledge, screw\)"):
+                                          r"ledge, screw; declare a new one under parts: in "
+                                          r"the cell config"):
         StateFolder(tmp_path, "cube").resolve("bolt", "cube")
     with pytest.raises(ConfigError, match="unknown part"):
         StateFolder(tmp_path, "cube").part_dir("../etc")
-    assert check_part("screw") == "screw"
+    assert StateFolder(tmp_path, "cube").resolve("screw", "cube") == "screw"
+
+
+def test_a_declared_part_has_a_folder_of_its_own(tmp_path):
+    declared = PARTS.with_declared(declare({"pin": {"grasp_width_mm": 6.0}}))
+    state = StateFolder(tmp_path, "cube", declared)
+    assert state.resolve("pin", "cube") == "pin"
+    assert state.part_dir("pin") == tmp_path / "pin"
+    _teach(tmp_path / "pin", "pin", 2)
+    assert state.taught() == {"pin": tmp_path / "pin"}
+    assert StateFolder(tmp_path, "cube").taught() == {}  # a config without it: not known
 
 
 def test_a_single_part_folder_is_read_as_the_part_it_records(tmp_path):

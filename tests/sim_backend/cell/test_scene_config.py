@@ -2,8 +2,6 @@
 
 from __future__ import annotations
 
-import typing
-
 import pytest
 
 from drivers.core.errors import ConfigError
@@ -12,9 +10,9 @@ from drivers.core.typed_config import from_mapping
 from sim_backend.cell.lighting import PRESETS, kelvin_rgb, resolve_light
 from sim_backend.cell.scene_config import (
     LightingConfig,
-    PartKind,
     SceneConfig,
     SimArmConfig,
+    load_parts,
     load_scene,
 )
 
@@ -50,7 +48,6 @@ def test_load_scene_ignores_other_sections_and_missing_scene(tmp_path):
 
 @pytest.mark.parametrize("data, message", [
     ({"object": {"size": 3}}, "scene.object.size: unknown key"),
-    ({"object": {"kind": "sphere"}}, "scene.object.kind: must be one of cube | nut"),
     ({"object": {"color": [1, 0]}}, "scene.object.color: expected 3 values"),
     ({"object": {"color": [1, 0, 2]}}, "scene.object.color: must be <= 1.0"),
     ({"table": {"texture": "marble"}}, "scene.table.texture: must be one of none | wood"),
@@ -80,8 +77,17 @@ def test_load_scene_names_the_file(tmp_path):
         load_scene(path)
 
 
-def test_part_kinds_match_the_registry():
-    assert set(typing.get_args(PartKind)) == set(PARTS)
+def test_load_parts_adds_the_files_declared_parts_with_meshes_from_its_folder(tmp_path):
+    path = tmp_path / "cell" / "finepos.yaml"
+    path.parent.mkdir()
+    path.write_text("parts:\n  pin: {mesh: meshes/pin.stl, grasp_width_mm: 6}\n")
+    catalogue = load_parts(path)
+    assert list(catalogue) == [*PARTS, "pin"]
+    assert catalogue["pin"].mesh_file == str(tmp_path / "cell" / "meshes" / "pin.stl")
+    path.write_text("parts:\n  pin: {grasp_width_mm: 6, jaw_opening_mm: 41}\n")
+    with pytest.raises(ConfigError, match=r"finepos.yaml: parts.pin.jaw_opening_mm: 41 mm is "
+                                          r"over the gripper's 40 mm opening$"):
+        load_parts(path)
 
 
 def test_sim_arm_config():
