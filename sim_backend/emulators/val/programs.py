@@ -10,7 +10,9 @@ ever silently skipped when it runs. The instructions (case-insensitive):
   ``OPENI`` / ``CLOSEI``: at once, after the motion, then the hand time;
 - ``MOVE loc`` / ``MOVES loc``: to a location set with ``DO SET`` or ``POINT`` (joint and
   straight-line motion are timed alike); ``APPRO loc, d`` / ``APPROS loc, d``: to ``d`` mm
-  before ``loc`` along its approach axis; ``DRAW dx,dy,dz``: by that much in the base frame;
+  before ``loc`` along its approach axis; ``DEPART d`` / ``DEPARTS d``: back ``d`` mm along
+  the tool's approach axis from where it stands; ``DRAW dx,dy,dz``: by that much in the base
+  frame;
 - ``REACTI sig[, prog]``: from now on a motion stops at once when input ``sig`` is high, then
   ``prog`` runs as a subroutine (none: the program stops); an input already high when armed
   reacts at once. ``IGNORE sig``: disarms it;
@@ -45,6 +47,7 @@ _FORMS: dict[str, re.Pattern[str]] = {
     "move": re.compile(rf"(#?{_NAME})"), "moves": re.compile(rf"(#?{_NAME})"),
     "appro": re.compile(rf"({_NAME})\s*,\s*({_NUMBER})"),
     "appros": re.compile(rf"({_NAME})\s*,\s*({_NUMBER})"),
+    "depart": re.compile(rf"({_NUMBER})"), "departs": re.compile(rf"({_NUMBER})"),
     "draw": re.compile(rf"({_NUMBER})\s*,\s*({_NUMBER})\s*,\s*({_NUMBER})"),
     "reacti": re.compile(rf"(\d+)(?:\s*,\s*({_NAME}))?"),
     "ignore": re.compile(r"(\d+)"),
@@ -75,7 +78,7 @@ def parse_instruction(line: str) -> tuple[str, tuple[str, ...]]:
     return name, tuple(g for g in match.groups() if g is not None)
 
 
-_MOTIONS = frozenset({"move", "moves", "appro", "appros", "draw"})
+_MOTIONS = frozenset({"move", "moves", "appro", "appros", "depart", "departs", "draw"})
 _PASSING = frozenset({"speed", "reacti", "ignore", "open", "close"})  # no stop of their own
 
 
@@ -160,6 +163,9 @@ class ProgramRun:
             if location is None:
                 raise InstructionError("Undefined location")
             self._motion(location.moved_in_tool_frame(ToolStep(dz_mm=-float(args[1]))), depth)
+        elif name in ("depart", "departs"):
+            here = arm.pose(fresh=False)
+            self._motion(here.moved_in_tool_frame(ToolStep(dz_mm=-float(args[0]))), depth)
         elif name == "draw":
             dx, dy, dz = (float(a) for a in args)
             here = arm.pose(fresh=False)

@@ -134,3 +134,13 @@ def test_abort_stops_a_running_program_at_once(session, arm):
     assert arm.halts >= 1
     assert HOME.z_mm - arm.pose().z_mm < 30.0
     assert session("where").endswith(".")
+
+
+def test_departs_backs_off_along_the_approach_axis(session, arm):
+    down = Pose(HOME.x_mm, HOME.y_mm, HOME.z_mm - 30.0, HOME.o_deg, HOME.a_deg, HOME.t_deg)
+    set_location(session, "fpd", down)
+    session.enter("lift", ["MOVES fpd", "CLOSEI", "DEPARTS 10", "TYPE FPUP"])
+    session("ex lift")
+    assert session.ended.get(timeout=WAIT_S) == "\r\nFPUP\r\n."
+    assert arm.pose().z_mm == pytest.approx(HOME.z_mm - 20.0)
+    assert arm.finger_width_mm() == 0.0  # closed before the lift
