@@ -123,12 +123,17 @@ class Device(ABC):
 class Descent:
     """What a guarded descent (``Arm.guarded_descent``) did.
 
-    pose: the tool pose where the arm stands; contact: the contact input stopped it before
-    the target (False: it reached the target, the input never tripped).
+    pose: the tool pose where the arm stands; contact: the contact input stopped it (before
+    the target; with ``closed``, after the jaws closed: before or during the lift); False: it
+    reached the target, and the lift's end when asked for, without the input tripping;
+    closed: the same run closed the jaws at the target (a descent asked to lift, that met
+    no contact on the way down); lifted: it then lifted the part the whole way.
     """
 
     pose: Pose
     contact: bool
+    closed: bool = False
+    lifted: bool = False
 
 
 @dataclass(frozen=True)
@@ -212,13 +217,16 @@ class Arm(Device):
         return False
 
     def guarded_descent(self, via: Pose, target: Pose, guard_speed_percent: float,
-                        guard_mm: float) -> Descent:
+                        guard_mm: float, lift_mm: float | None = None) -> Descent:
         """Open the jaws as the arm starts, move to ``via`` at the set speed, on along the
         approach axis for ``guard_mm`` at ``guard_speed_percent`` of it, and the rest of the
         way to ``target`` at the set speed again, stopping at once wherever the contact input
-        (the wrist sensor's monitor output) trips: one controller command.
+        (the wrist sensor's monitor output) trips: one controller command. With ``lift_mm``
+        the same command then closes the jaws at ``target`` (waiting the hand time) and lifts
+        ``lift_mm`` back along the approach axis, the input still armed: high after the close
+        (a finger pushing on the part), the lift stops or never starts.
 
-        Both poses pass the safety layer first (rejected, nothing moves, when either is beyond
+        Every pose passes the safety layer first (rejected, nothing moves, when one is beyond
         it). Raises MotionRejectedError when the input is already high (nothing moves), or
         when the arm does not run programs (``runs_programs``).
         """
@@ -230,20 +238,26 @@ class Arm(Device):
                                       f"{guard_speed_percent!r}")
         if not guard_mm >= 0.0:
             raise MotionRejectedError(f"guard length must be >= 0 mm, got {guard_mm!r}")
+        if lift_mm is not None and not lift_mm > 0.0:
+            raise MotionRejectedError(f"lift must be > 0 mm, got {lift_mm!r}")
         current = self._start_pose()
+        poses = [via, target]
+        if lift_mm is not None:
+            poses.append(target.moved_in_tool_frame(ToolStep(dz_mm=-lift_mm)))
         if self.limits:
-            for pose in (via, target):
+            for pose in poses:
                 decision = check_target(pose, current, self.limits)
                 if decision.clipped:
                     raise MotionRejectedError(f"guarded descent beyond the safety limits at "
                                               f"{pose}")
         self._reached, self._move_start = None, current
         try:
-            descent = self._guarded_descent(via, target, guard_speed_percent, guard_mm)
+            descent = self._guarded_descent(via, target, guard_speed_percent, guard_mm,
+                                            lift_mm)
         finally:
             self._move_start = None
         self._reached = descent.pose
-        self._jaws_open = True
+        self._jaws_open = not descent.closed
         return descent
 
     @staticmethod
@@ -278,7 +292,7 @@ class Arm(Device):
         return self.pose(fresh=False), stop()
 
     def _guarded_descent(self, via: Pose, target: Pose, guard_speed_percent: float,
-                         guard_mm: float) -> Descent:
+                         guard_mm: float, lift_mm: float | None) -> Descent:
         """Backends that run programs implement this (see ``guarded_descent``)."""
         raise MotionRejectedError(f"{type(self).__name__} runs no guarded descent")
 

@@ -30,7 +30,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from drivers.core.errors import DeviceFaultError, FineposError, MotionRejectedError
-from drivers.core.pose import Pose
+from drivers.core.pose import Pose, ToolStep
 from drivers.core.timing import (
     VAL_SPEED_MAX,
     VAL_SPEED_MIN,
@@ -65,11 +65,11 @@ _WATCH_STEP_MM = 0.25
 _IDEAL_WATCH_STEP_MM = 1.0
 _IDEAL_FAST_WATCH_STEP_MM = 5.0
 # The VAL lines of one guarded descent on the program path, as the VAL driver's defaults send
-# them: two ``do set`` lines of a location (57 characters each), ``ex fpdesc``, the ``*``
-# prompt and the closing prompt (see ``drivers.val.config``).
+# them: two ``do set`` lines of a location (57 characters each), ``ex fpdesc`` (or
+# ``ex fpgrip``), the ``*`` prompt and the closing prompt (see ``drivers.val.config``).
 _SET_LINE_CHARS = 57
-_DESCENT_LINES = ("ex fpdesc",)
-_DESCENT_SEGMENTS = 3  # to fpa, the guarded part at the guard speed, the rest
+_DESCENT_LINE = "ex fpdesc"
+_GRIP_LINE = "ex fpgrip"  # the descent, then the close and the lift in the same run
 
 
 @dataclass
@@ -291,18 +291,20 @@ class SimArm(Arm):
             yield last
 
     def _guarded_descent(self, via: Pose, target: Pose, guard_speed_percent: float,
-                         guard_mm: float) -> Descent:
+                         guard_mm: float, lift_mm: float | None) -> Descent:
         """In process, as the VAL driver's program path: the target lines and ``ex fpdesc``
-        on the VAL line, the jaws opening as the arm starts, the first motion with its
-        set-up, the guarded one at the guard speed and the rest without, settling where the
-        arm stops (at the target, or on contact);
-        a stop on contact costs a ``where`` (the driver reads where the arm stopped)."""
+        (with ``lift_mm``: ``ex fpgrip``) on the VAL line, the jaws opening as the arm
+        starts, the first motion with its set-up, the guarded one at the guard speed and the
+        rest without, settling where the arm stops (at the target, or on contact); with
+        ``lift_mm`` then the close (the hand time) and the lift without a set-up of its own,
+        the input still watched; a stop on contact costs a ``where`` (the driver reads where
+        the arm stopped)."""
         timing = self.timing
         wire = contact_wire(self.cell)
         if timing is not None:
             lines = [cell_timing.val_exchange_bytes("x" * _SET_LINE_CHARS)] * 2
-            lines += [cell_timing.val_exchange_bytes(line, 3) for line in _DESCENT_LINES]
-            timing.val_wire(sum(lines))
+            line = _GRIP_LINE if lift_mm is not None else _DESCENT_LINE
+            timing.val_wire(sum(lines) + cell_timing.val_exchange_bytes(line, 3))
         if wire.high():
             raise MotionRejectedError("the contact input is high before the descent")
         self.cell.open_gripper()
@@ -314,9 +316,32 @@ class SimArm(Arm):
                                             settle=i == len(segments) - 1)
             if contact:
                 break
+        closed = lifted = False
+        if not contact and lift_mm is not None:
+            self._close_in_program()
+            closed = True
+            lift = target.moved_in_tool_frame(ToolStep(dz_mm=-lift_mm))
+            pose, contact = self.move_until(lift, wire.high, 1.0, setup=False, settle=True)
+            lifted = not contact
         if contact and timing is not None:
             timing.val_wire(cell_timing.where_bytes())
-        return Descent(pose, contact)
+        return Descent(pose, contact, closed, lifted)
+
+    def _close_in_program(self) -> None:
+        """A program's ``CLOSEI``: the jaws close where the arm stands, then the hand time
+        (no command of its own on the line)."""
+        timing = self.timing
+        begin = timing.clock.now() if timing is not None else 0.0
+        self.cell.close_gripper()
+        if timing is None:
+            return
+        hand_s = timing.config.arm.hand_time_s
+        if timing.clock.virtual:
+            timing.motion(hand_s, "hand")
+        else:
+            timing.note(hand_s, "hand")
+            timing.clock.advance(begin + hand_s - timing.clock.now())
+        timing.at_rest_s = timing.clock.now()
 
     def _set_speed(self, percent: float) -> None:
         self.speed_percent = percent

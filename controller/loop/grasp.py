@@ -19,6 +19,14 @@ readings has 1/sqrt(N) of one reading's noise: with an ATI sensor at 20 counts p
 about one count of noise, 16 readings give about 0.013 N against the 15 g cube's 0.147 N.
 ``width`` checks the finger width instead, for grippers that measure it (the VAL gripper
 reports none: its width is a configured nominal).
+
+On an arm that runs programs (``Arm.runs_programs``) the descent is one controller program
+stopped by the wrist sensor's own monitor output, and with the weight check and a lift the
+same run also closes the jaws and lifts: the open-jaw mean is read before the descent (same
+approach axis, no contact), the sensor's contact condition stays armed through the close and
+the lift (a finger pushing on the part stops the run before the lift: a jam), and the host
+reads the sensor once more, on the lifted part. A contact on the way down stops the run before
+the close; the host then goes on as above.
 """
 
 from __future__ import annotations
@@ -34,7 +42,7 @@ import numpy as np
 from controller.loop.guards import Guard, first_tripped
 from drivers.core.errors import MotionRejectedError
 from drivers.core.pose import Pose, ToolStep
-from drivers.interfaces import Arm, MonitorCondition, WrenchSensor
+from drivers.interfaces import Arm, Descent, MonitorCondition, WrenchSensor
 
 GraspCheck = Literal["weight", "width", "both"]
 
@@ -52,16 +60,17 @@ class GraspConfig:
     """Config section ``controller.grasp``.
 
     free_descent_mm: the first move's length (the guards read after it). The part's top
-    lies ``APPROACH_HEIGHT_MM`` (35 mm; the simulated cube's fingertips meet it at 35.9 mm)
-    below the pre-grasp pose, so the default ends 2 mm below it: a finger landing on the top
-    has pushed into it by 1-2 mm when the guards read, and the way there is free space the
-    camera has just seen; step_mm / guard_zone_mm: below the free descent, guarded steps of
-    ``step_mm`` go down ``guard_zone_mm``, where a finger just over the part's edge meets
-    its rounded rim (on the simulated cube down to 41 mm for a finger 0.5 mm over the edge),
-    so no contact is pushed deeper than one step; below that the fingers pass beside the
-    part's faces and the rest of the descent is one move (the guards read after it). Each
-    step is one VAL exchange and one move (about 0.35 s at 9600 baud); a large zone (100)
-    steps all the way down, as a crowded table may need; contact_margin_mm: the last part of
+    lies ``APPROACH_HEIGHT_MM`` (35 mm; on the simulated cube a finger over its edge or rim
+    meets it from 35.1 mm on) below the pre-grasp pose, so the default ends at it, before
+    any contact, and the way there is free space the camera has just seen; step_mm /
+    guard_zone_mm: below the free descent, guarded steps of ``step_mm`` go down
+    ``guard_zone_mm``, where a finger over the part's top or edge meets it (on the
+    simulated cube down to 41 mm for a finger 0.5 mm over the edge), so no contact is pushed
+    deeper than one step (at the simulated contact's 10 N/mm, 1.2 mm stays under the 15 N
+    "excessive force" limit); below that the fingers pass beside the part's faces and the
+    rest of the descent is one move (the guards read after it). Each step is one VAL
+    exchange and one move (about 0.35 s at 9600 baud); a large zone (100) steps all the way
+    down, as a crowded table may need; contact_margin_mm: the last part of
     the descent in which contact is expected (guards named "early contact" are ignored there);
     carry_final_step: where a grasp follows the positioning loop in the same run
     (``finepos position --grasp``, the service's ``position`` job with ``grasp``, the
@@ -82,19 +91,20 @@ class GraspConfig:
     object width; lift_mm: how far to lift after closing (the weight check needs the part off
     the table); min_held_weight_n: the least weight (N) the lifted part must put on the wrist
     sensor (None: half the part's catalogue weight); weight_samples: readings averaged for the
-    two weight measurements (open jaws at the bottom, lifted part); closing_samples: readings
+    two weight measurements (open jaws at the bottom, or on the program path before the
+    descent; the lifted part); closing_samples: readings
     averaged after closing for the jam check (its 5 N limit is a hundred times one reading's
     noise); max_closing_force_n: a larger change of the mean force while the jaws close means
     a finger jammed on the part; guards: evaluated in order after every descent move.
     """
 
-    step_mm: float = field(default=2.0, metadata={"min": 0.05, "max": 10.0})
-    free_descent_mm: float = field(default=37.0, metadata={"min": 0.0, "max": 100.0})
-    guard_zone_mm: float = field(default=4.0, metadata={"min": 0.0, "max": 1000.0})
+    step_mm: float = field(default=1.2, metadata={"min": 0.05, "max": 10.0})
+    free_descent_mm: float = field(default=35.0, metadata={"min": 0.0, "max": 100.0})
+    guard_zone_mm: float = field(default=6.0, metadata={"min": 0.0, "max": 1000.0})
     contact_margin_mm: float = field(default=2.0, metadata={"min": 0.0})
     carry_final_step: bool = True
     guard_speed_percent: float = field(default=10.0, metadata={"min": 1.0, "max": 100.0})
-    guard_clearance_mm: float = field(default=3.0, metadata={"min": 0.0, "max": 100.0})
+    guard_clearance_mm: float = field(default=1.0, metadata={"min": 0.0, "max": 100.0})
     contact_axis: Literal["fx_n", "fy_n", "fz_n"] = "fz_n"
     check: GraspCheck = "weight"
     width_tolerance_mm: float = field(default=4.0, metadata={"min": 0.0})
@@ -119,8 +129,8 @@ class GraspResult:
     max_force_n: largest force seen; forces_n: force magnitude after each descent step;
     held_weight_n: the part's weight measured after the lift (None when not lifted);
     closing_force_n: how much the mean force changed while the jaws closed (None when they
-    did not close); carried_step: the positioning loop's converged step the first descent
-    move made (None: none carried)."""
+    did not close, or closed in the descent's program run without a jam); carried_step: the
+    positioning loop's converged step the first descent move made (None: none carried)."""
 
     success: bool
     reason: str
@@ -208,10 +218,16 @@ def guarded_grasp(arm: Arm, sensor: WrenchSensor, grasp_depth_mm: float,
         lateral = carried if carried is not None else ToolStep()
         via = start.moved_in_tool_frame(dataclasses.replace(lateral, dz_mm=fast))
         target = start.moved_in_tool_frame(dataclasses.replace(lateral, dz_mm=grasp_depth_mm))
+        # the close and the lift in the same run where nothing need be read between them:
+        # the weight check's reference is then read here (open jaws, no contact, the same
+        # approach axis), and the sensor's condition watches the close for a jam
+        grip = lift and config.check == "weight" and config.lift_mm > 0
+        reference = mean_force(sensor, config.weight_samples) if grip else None
         try:
             descent = arm.guarded_descent(
                 via, target, config.guard_speed_percent,
-                config.free_descent_mm + config.guard_zone_mm - fast)
+                config.free_descent_mm + config.guard_zone_mm - fast,
+                config.lift_mm if grip else None)
         except MotionRejectedError as exc:
             result.reason = f"descent refused: {exc}"
             logger.warning("grasp: %s", result.reason)
@@ -220,6 +236,9 @@ def guarded_grasp(arm: Arm, sensor: WrenchSensor, grasp_depth_mm: float,
             result.carried_step = dataclasses.replace(carried, dz_mm=0.0)
             if on_carried is not None:
                 on_carried()
+        if descent.closed and reference is not None:
+            return _gripped_in_the_run(arm, sensor, descent, result, reference,
+                                       grasp_depth_mm, config, threshold, retreat)
         depth = start.tool_step_to(descent.pose).dz_mm
         result.depth_mm = depth
         wrench = sensor.read()
@@ -306,4 +325,34 @@ def guarded_grasp(arm: Arm, sensor: WrenchSensor, grasp_depth_mm: float,
                            f"{threshold:.3f} N")
     result.success = True
     result.reason = result.reason or "held after lift"
+    return result
+
+
+def _gripped_in_the_run(arm: Arm, sensor: WrenchSensor, descent: Descent,
+                        result: GraspResult, reference: np.ndarray, grasp_depth_mm: float,
+                        config: GraspConfig, threshold: float,
+                        retreat: Callable[[str], GraspResult]) -> GraspResult:
+    """The rest of a grasp whose descent run also closed the jaws and lifted (the program
+    path): a jam stopped the run (the sensor's contact condition held after the close), or
+    the lifted part is weighed against ``reference``, the mean force read with open jaws
+    before the descent."""
+    result.depth_mm = grasp_depth_mm
+    result.width_mm = arm.finger_width_mm()
+    if descent.contact:  # the condition held once the jaws closed: a finger on the part
+        closing = mean_force(sensor, config.closing_samples) - reference
+        result.closing_force_n = float(np.linalg.norm(closing))
+        result.max_force_n = max(result.max_force_n, result.closing_force_n)
+        limit = contact_condition(config)
+        return retreat(f"grip check failed: {limit.axis} {limit.op} {limit.limit:g} N once "
+                       f"the jaws closed (a finger jammed on the part)")
+    samples = config.weight_samples
+    held = mean_force(sensor, samples) - reference
+    result.forces_n.append(float(np.linalg.norm(held)))
+    result.max_force_n = max(result.max_force_n, result.forces_n[-1])
+    result.held_weight_n = float(held[2])
+    if result.held_weight_n < threshold:
+        return retreat(f"grip check failed: {result.held_weight_n:.3f} N on the wrist "
+                       f"after lifting (mean of {samples}), expected at least "
+                       f"{threshold:.3f} N")
+    result.success, result.reason = True, "held after lift"
     return result

@@ -612,7 +612,8 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                         help="the emulated cell's timing (default ideal: as fast as it goes)")
     parser.add_argument("--programs", action="store_true",
                         help="the VAL driver's program path (arm.programs): the grasp's "
-                             "descent as one program on the emulated controller")
+                             "descent, close and lift as one program on the emulated "
+                             "controller")
     parser.add_argument("--json", metavar="OUT", help="also write the report here")
 
 

@@ -34,10 +34,10 @@ from drivers.core.errors import (
     MotionRejectedError,
     ProtocolError,
 )
-from drivers.core.pose import Pose
+from drivers.core.pose import Pose, ToolStep
 from drivers.interfaces import Arm, Descent
 from drivers.safety import SafetyLimits
-from drivers.val.config import ValConfig
+from drivers.val.config import DESCENT_PROGRAM, GRIP_PROGRAM, ValConfig
 from drivers.val.link import ExchangeInterrupted, ValLink
 from drivers.val.replies import Reply, ReplyKind
 from drivers.val.where import WhereReading, parse_where
@@ -204,20 +204,27 @@ class ValArm(Arm):
                                echo=self.config.echo)
 
     def _guarded_descent(self, via: Pose, target: Pose, guard_speed_percent: float,
-                         guard_mm: float) -> Descent:
-        """``do set`` the two locations, then one ``execute`` of the descent program; the
-        reaction subroutine's text says the input stopped it, and a ``where`` then reads
-        where. An arm that did not move at all met an input already high: refused."""
+                         guard_mm: float, lift_mm: float | None) -> Descent:
+        """``do set`` the two locations, then one ``execute`` of the descent program (with
+        ``lift_mm``, and ``fpgrip`` among the programs: of the one that also closes and
+        lifts); the reaction subroutine's text says the input stopped it, and a ``where``
+        then reads where. An arm that did not move at all met an input already high:
+        refused."""
         cfg = self.config
+        grip = lift_mm is not None and GRIP_PROGRAM in cfg.program_lines
+        program = GRIP_PROGRAM if grip else DESCENT_PROGRAM
         with self._faulting("programs"):
             _, rest_mm = self.guard_end(via, target, guard_mm)
-            self._load_programs(cfg.program_text(guard_speed_percent, round(rest_mm, 2)))
+            self._load_programs(cfg.program_text(guard_speed_percent, round(rest_mm, 2),
+                                                 round(lift_mm, 2) if grip else 10.0,
+                                                 run=program))
         start = self._move_start if self._move_start is not None else self._read_pose()
         for name, pose in (("fpa", via), ("fpd", target)):
             self._command_without_output(cfg.commands.set_location.format(name=name,
                                                                           **pose.as_dict()))
         halts = self._halts
-        line = cfg.commands.execute.format(program="fpdesc")
+        self._gripper_closed = False  # the program opens the jaws as it starts
+        line = cfg.commands.execute.format(program=program)
         try:
             with self._faulting(line):
                 reply = self._command(line, cfg.move_timeout_s)
@@ -228,10 +235,17 @@ class ValArm(Arm):
                 self.link.exchange(cfg.commands.halt, cfg.exchange_timeout_s, echo=cfg.echo)
             raise
         if self._halts != halts:
-            raise MotionRejectedError("halted during the descent program")
-        contact = any(text.strip().casefold() == cfg.program_contact_text.casefold()
-                      for text in reply.lines)
-        if not contact:
+            raise MotionRejectedError(f"halted during the {program} program")
+        typed = {text.strip().casefold() for text in reply.lines}
+        jammed = grip and cfg.program_jam_text.casefold() in typed
+        if jammed:
+            self._gripper_closed = True
+            return Descent(self._where().pose, True, closed=True)
+        if cfg.program_contact_text.casefold() not in typed:
+            if grip:
+                self._gripper_closed = True
+                return Descent(target.moved_in_tool_frame(ToolStep(dz_mm=-lift_mm)), False,
+                               closed=True, lifted=True)
             return Descent(target, False)
         pose = self._where().pose
         if all(abs(a - b) <= _NOT_MOVED for a, b in zip(pose.as_dict().values(),

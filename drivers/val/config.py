@@ -27,7 +27,10 @@ _TEMPLATE_FIELDS: dict[str, dict[str, float]] = {
                      "a_deg": 5.0, "t_deg": 6.0},
 }
 # The fields a program line may use.
-_PROGRAM_FIELDS = {"input": 1001, "guard_speed": 25.0, "rest_mm": 9.0}
+_PROGRAM_FIELDS = {"input": 1001, "guard_speed": 25.0, "rest_mm": 9.0, "lift_mm": 10.0}
+# The programs a descent runs: without a lift, and with the close and the lift.
+DESCENT_PROGRAM = "fpdesc"
+GRIP_PROGRAM = "fpgrip"
 
 
 @dataclass(frozen=True)
@@ -105,24 +108,31 @@ class ValConfig:
         20 mm / 10 deg (a judgement: a few hundred ms per segment). A target the controller
         refuses may then be refused after the first segments have moved.
     commands: the command templates.
-    programs: run the grasp's guarded descent as a program on the controller (one
-        ``execute`` per descent, stopped by ``REACTI`` on ``program_input``, the line that
-        carries the wrist sensor's monitor output); the programs are downloaded when the arm
-        connects, checked by listing them back and entered again where a listing differs; a
-        program VAL refuses, or one that lists back otherwise, fails the connection naming
-        the program and the line. false: one monitor command per move.
+    programs: run the grasp's guarded descent, and with it the close and the lift, as a
+        program on the controller (one ``execute`` per grasp, stopped by ``REACTI`` on
+        ``program_input``, the line that carries the wrist sensor's monitor output); the
+        programs are downloaded when the arm connects, checked by listing them back and
+        entered again where a listing differs; a program VAL refuses, or one that lists back
+        otherwise, fails the connection naming the program and the line. false: one monitor
+        command per move.
     program_input: the VAL input line wired to the sensor's discrete output.
     program_guard_speed: the program speed (percent) the descent program is entered with; a
         descent asking for another enters it again.
     program_contact_text: what the reaction subroutine types when the input stopped the arm.
     program_lines: the programs, name -> lines (``str.format`` fields ``input``,
-        ``guard_speed`` and ``rest_mm``). The descent program moves to location ``fpa`` at full
-        speed, at the guard speed to ``rest_mm`` before ``fpd`` along its approach axis
-        (``APPROS``), then to ``fpd`` at full speed; it must open the jaws as it starts and arm
-        ``REACTI`` on the input before moving. A descent whose ``guard_speed`` or ``rest_mm``
-        differs from the text on the controller enters it again (a part taught to another
-        depth: once). Instruction spellings are VAL II's as documented,
-        unconfirmed on a wire: check them on the controller.
+        ``guard_speed``, ``rest_mm`` and ``lift_mm``). The descent program ``fpdesc`` moves to
+        location ``fpa`` at full speed, at the guard speed to ``rest_mm`` before ``fpd`` along
+        its approach axis (``APPROS``), then to ``fpd`` at full speed; it must open the jaws as
+        it starts and arm ``REACTI`` on the input before moving. ``fpgrip`` (optional; without
+        it the host closes and lifts) descends the same way, then arms the input again with
+        ``fpjam``, closes the jaws (``CLOSEI``: after the motion, then the hand time) and lifts
+        ``lift_mm`` (``DEPARTS``); a reaction types ``program_contact_text`` (on the way down)
+        or ``program_jam_text`` (after the close). A grasp whose ``guard_speed``, ``rest_mm``
+        or ``lift_mm`` differs from the text on the controller enters its program again (a
+        part taught to another depth: once). Instruction spellings are VAL II's as
+        documented, unconfirmed on a wire: check them on the controller.
+    program_jam_text: what the reaction subroutine after the close types (the input went
+        high once the jaws closed: a finger pushing on the part).
     """
 
     port: str
@@ -150,21 +160,30 @@ class ValConfig:
     program_input: int = field(default=1001, metadata={"min": 1})
     program_guard_speed: float = field(default=10.0, metadata={"min": 0.01, "max": 100.0})
     program_contact_text: str = "FPCONTACT"
+    program_jam_text: str = "FPJAM"
     program_lines: dict[str, tuple[str, ...]] = field(default_factory=lambda: {
         "fpstop": ("TYPE FPCONTACT", "STOP"),
-        "fpdesc": ("SPEED 100", "OPEN", "REACTI {input}, fpstop", "MOVES fpa",
-                   "SPEED {guard_speed:g}", "APPROS fpd, {rest_mm:.2f}", "SPEED 100",
-                   "MOVES fpd", "IGNORE {input}"),
+        "fpjam": ("TYPE FPJAM", "STOP"),
+        DESCENT_PROGRAM: ("SPEED 100", "OPEN", "REACTI {input}, fpstop", "MOVES fpa",
+                          "SPEED {guard_speed:g}", "APPROS fpd, {rest_mm:.2f}", "SPEED 100",
+                          "MOVES fpd", "IGNORE {input}"),
+        GRIP_PROGRAM: ("SPEED 100", "OPEN", "REACTI {input}, fpstop", "MOVES fpa",
+                       "SPEED {guard_speed:g}", "APPROS fpd, {rest_mm:.2f}", "SPEED 100",
+                       "MOVES fpd", "REACTI {input}, fpjam", "CLOSEI",
+                       "DEPARTS {lift_mm:.2f}", "IGNORE {input}"),
     })
 
-    def program_text(self, guard_speed: float | None = None,
-                     rest_mm: float = 0.0) -> dict[str, tuple[str, ...]]:
-        """The programs as entered on the controller (fields filled in)."""
+    def program_text(self, guard_speed: float | None = None, rest_mm: float = 0.0,
+                     lift_mm: float = 10.0, run: str | None = None
+                     ) -> dict[str, tuple[str, ...]]:
+        """The programs as entered on the controller (fields filled in); ``run``: only that
+        main program (``fpdesc`` or ``fpgrip``) of the two, with every other program."""
         speed = self.program_guard_speed if guard_speed is None else guard_speed
+        skipped = {DESCENT_PROGRAM, GRIP_PROGRAM} - {run} if run is not None else set()
         return {name: tuple(line.format(input=self.program_input, guard_speed=speed,
-                                        rest_mm=rest_mm)
+                                        rest_mm=rest_mm, lift_mm=lift_mm)
                             for line in lines)
-                for name, lines in self.program_lines.items()}
+                for name, lines in self.program_lines.items() if name not in skipped}
 
     def __post_init__(self) -> None:
         if not self.port.strip():
@@ -180,15 +199,17 @@ class ValConfig:
                              f"above 0, got {self.max_segment_mm} / {self.max_segment_deg}")
         if any(not text.strip() for text in self.rejection_errors):
             raise ValueError("rejection_errors: entries must not be empty")
-        if self.programs and "fpdesc" not in self.program_lines:
-            raise ValueError("program_lines: the descent program 'fpdesc' is missing")
+        if self.programs and DESCENT_PROGRAM not in self.program_lines:
+            raise ValueError(f"program_lines: the descent program {DESCENT_PROGRAM!r} is "
+                             "missing")
         for name, lines in self.program_lines.items():
             for i, line in enumerate(lines, 1):
                 try:
                     text = line.format(**_PROGRAM_FIELDS)
                 except (KeyError, IndexError, ValueError) as exc:
                     raise ValueError(f"program_lines.{name}[{i}]: {line!r} does not format "
-                                     f"with the fields input, guard_speed, rest_mm: "
+                                     f"with the fields input, guard_speed, rest_mm, "
+                                     f"lift_mm: "
                                      f"{exc!r}") from exc
                 if not text.strip() or not text.isascii() or any(c in text for c in "\r\n"):
                     raise ValueError(f"program_lines.{name}[{i}]: must be one ASCII line")

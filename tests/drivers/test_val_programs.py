@@ -43,7 +43,8 @@ def test_programs_are_entered_once_and_listed_back(emulator):
     with program_arm(emulator):  # the listings match: nothing is entered again
         pass
     assert not any(line.startswith("edit") for line in lines[entered:])
-    assert sum(line.startswith("listp") for line in lines[entered:]) == 2
+    assert sum(line.startswith("listp") for line in lines[entered:]) == len(
+        ValConfig(port="loop://").program_lines)
 
 
 def test_one_execute_per_descent_that_reaches_its_target(emulator, backing):
@@ -203,3 +204,35 @@ def test_a_connect_that_finds_the_editor_open_ends_it_and_enters_the_program_aga
         assert arm.runs_programs
     assert "e" in lines[:3], lines[:5]  # the editor ended at start-up
     assert "edit fpdesc" in lines
+
+
+def test_one_execute_descends_closes_and_lifts(emulator, backing):
+    with program_arm(emulator) as arm:
+        lines = heard(emulator)
+        descent = arm.guarded_descent(down(20.0), down(30.0), 25.0, 4.0, lift_mm=10.0)
+        assert "DEPARTS 10.00" in lines  # fpgrip entered again with the lift asked for
+        lines.clear()
+        again = arm.guarded_descent(down(10.0), down(20.0), 25.0, 4.0, lift_mm=10.0)
+    assert descent.closed and descent.lifted and not descent.contact
+    assert descent.pose.z_mm == pytest.approx(HOME.z_mm - 20.0)
+    assert again.lifted and backing.pose().z_mm == pytest.approx(HOME.z_mm - 10.0)
+    assert backing.finger_width_mm() == 0.0
+    assert [line.split()[0] for line in lines] == ["do", "do", "ex"]
+    assert lines[-1] == "ex fpgrip"
+
+
+def test_an_input_high_once_the_jaws_closed_stops_before_the_lift(emulator, backing):
+    emulator.monitor.set_input(1001, lambda: backing.finger_width_mm() < 40.0)
+    with program_arm(emulator) as arm:
+        descent = arm.guarded_descent(down(20.0), down(30.0), 25.0, 4.0, lift_mm=10.0)
+        assert arm.finger_width_mm() == 0.0
+    assert descent.contact and descent.closed and not descent.lifted
+    assert descent.pose.z_mm == pytest.approx(HOME.z_mm - 30.0)  # where reads it: no lift
+
+
+def test_a_lift_beyond_the_safety_limits_refuses_the_whole_run(emulator, backing):
+    with program_arm(emulator) as arm:
+        lines = heard(emulator)
+        with pytest.raises(MotionRejectedError):
+            arm.guarded_descent(down(20.0), down(30.0), 25.0, 4.0, lift_mm=100.0)
+    assert [line for line in lines if line != "where"] == [] and backing.moves == []
