@@ -31,6 +31,7 @@ from controller.recipe import Recipe, recipe_of_model, with_recipe_stored
 from controller.systems.base import TrainedModel
 from controller.systems.registry import DEFAULT_SYSTEM, SYSTEMS
 from controller.teach.acquisition import acquire, grid_for, random_set, transfer
+from controller.teach.symmetry import find_symmetry
 from drivers.core.cell_state import CellState
 from drivers.core.errors import ConfigError, FineposError
 from drivers.core.pose import Pose
@@ -89,9 +90,13 @@ class FinePositioner:
 
     # -- teach-in -------------------------------------------------------------------------
     def teach(self, source: str, grasp_depth_mm: float | None = None,
-              object_width_mm: float | None = None) -> CellState:
+              object_width_mm: float | None = None, kappa: int | None = None) -> CellState:
         """Record the arm's current pose as the nominal pre-grasp pose, with the part's
         symmetry and grasp geometry, into ``cell.json``.
+
+        A part declared without kappa has it found from its own images at this pose
+        (``controller.teach.symmetry``): the tool turns a full turn and comes back. The kappa
+        found and how sure it is are recorded (``CellState.kappa_found``).
 
         Args:
             source: how the arm got there (``auto``, ``current``, ``spacenav``), stored.
@@ -99,9 +104,16 @@ class FinePositioner:
                 simulated part on the simulated cell, else ``controller.part`` from the parts
                 catalogue).
             object_width_mm: the finger width holding the part; default as above.
+            kappa: the part's symmetry as the operator confirms it (default: the declared
+                one, else the one found).
 
         Returns:
             The stored state.
+
+        Raises:
+            FineposError: the kappa found is unsure and none is confirmed (the message gives
+                the best guess and how to confirm it), or ``kappa`` disagrees with the
+                declared one.
         """
         pose = self.devices.arm.pose()
         cell = self.devices.cell
@@ -111,20 +123,35 @@ class FinePositioner:
         else:
             part = self.config.parts.part(self.config.controller.part)
             default_depth = part.grasp_depth_mm
-        if part.kappa is None:
-            raise ConfigError(f"parts.{part.kind}.kappa: not declared; declare the part's "
-                              "rotational symmetry (the number of turns that repeat its view)")
+        found = None
+        if part.kappa is not None:
+            if kappa is not None and kappa != part.kappa:
+                raise ConfigError(f"--kappa: {kappa}, but parts.{part.kind}.kappa is declared "
+                                  f"{part.kappa}")
+            kappa = part.kappa
+        elif kappa is None:
+            found = find_symmetry(self.devices.arm, self.devices.camera, pose, self.move_to)
+            if not found.sure:
+                guess = f"best guess {found.kappa}" if found.kappa else "no guess"
+                raise FineposError(
+                    f"kappa of the {part.kind}: unsure ({guess}, confidence "
+                    f"{found.confidence:.2f}: {found.reason}); confirm it with --kappa N or "
+                    f"declare parts.{part.kind}.kappa")
+            kappa = found.kappa
         grasp_depth_mm = default_depth if grasp_depth_mm is None else grasp_depth_mm
         object_width_mm = part.grasp_width_mm if object_width_mm is None else object_width_mm
-        state = CellState(pose, part.kind, part.kappa, float(grasp_depth_mm),
-                          float(object_width_mm), source, CellState.now())
+        state = CellState(pose, part.kind, kappa, float(grasp_depth_mm),
+                          float(object_width_mm), source, CellState.now(),
+                          None if found is None else found.as_dict())
         state.save(self.state_path)
-        logger.info("taught nominal pose %s (%s, kappa %d) from %s into %s", pose.as_dict(),
-                    part.kind, part.kappa, source, self.state_path)
+        logger.info("taught nominal pose %s (%s, kappa %d%s) from %s into %s", pose.as_dict(),
+                    part.kind, kappa, "" if found is None else ", found from images", source,
+                    self.state_path)
         return state
 
-    def teach_auto(self) -> CellState:
-        """Simulated cell only: place the gripper at the part's true grasp pose and record it.
+    def teach_auto(self, kappa: int | None = None) -> CellState:
+        """Simulated cell only: place the gripper at the part's true grasp pose and record it
+        (``kappa``: as ``teach``).
 
         Raises:
             FineposError: not on the simulated cell.
@@ -133,7 +160,7 @@ class FinePositioner:
         if cell is None:
             raise FineposError("teach --auto needs the simulated cell (arm type sim)")
         self.move_to(cell.nominal_grasp_pose())
-        return self.teach("auto")
+        return self.teach("auto", kappa=kappa)
 
     def move_to(self, target: Pose) -> None:
         """Move there in steps within the safety limits (``safety.max_step_mm``/``_deg``)."""

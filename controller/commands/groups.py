@@ -21,6 +21,7 @@ BENCH_LEAVES = {
     "ati": "sim_backend.emulators.ati.bench",
     "camera-stream": "sim_backend.emulators.mjpeg.bench",
     "recording": "controller.recording.bench",
+    "symmetry": "controller.evaluation.symmetry_bench",
 }
 
 DOCS_LEAVES = {

@@ -26,6 +26,7 @@ from controller.commands.common import (
     parse_triple,
     part_setup,
     positive_float,
+    positive_int,
     run_recorder,
     state_root,
 )
@@ -70,7 +71,7 @@ def cmd_teach(args) -> int:
             open_devices(config) as devices:
         fp = FinePositioner(devices, config, state_dir=state_dir)
         if args.auto:
-            state = fp.teach_auto()
+            state = fp.teach_auto(kappa=args.kappa)
         elif args.device == "spacenav":
             try:
                 state = teach_with_spacenav(
@@ -83,10 +84,12 @@ def cmd_teach(args) -> int:
                                   "reason": str(exc)})
                 return 1
         else:
-            state = fp.teach("current", args.grasp_depth_mm, args.object_width_mm)
+            state = fp.teach("current", args.grasp_depth_mm, args.object_width_mm,
+                             kappa=args.kappa)
     write_json(None, {"part": state.object_kind, "state_file": str(fp.state_path),
                       "nominal_pose": state.nominal_pose.as_dict(), "object": state.object_kind,
-                      "kappa": state.kappa, "source": state.source})
+                      "kappa": state.kappa, "source": state.source,
+                      "kappa_found": state.kappa_found})
     return 0
 
 
@@ -193,7 +196,10 @@ def register(subparsers) -> None:
                     "Each part is taught into its own folder under the state folder "
                     "(state/<part>/cell.json); --part NAME teaches that part (on the simulated "
                     "cell it is put on the table first).\n\n"
-                    "Example: finepos teach --auto --part nut")
+                    "Example: finepos teach --auto --part nut\n\n"
+                    "A part declared without kappa has it found from its own images: the tool "
+                    "turns a full turn at the taught pose; where the evidence is weak teach "
+                    "refuses to guess and names its best guess: confirm it with --kappa N.")
     add_config_option(p)
     add_device_options(p)
     add_part_option(p, "the cell's: the simulated table's, or controller.part")
@@ -204,6 +210,9 @@ def register(subparsers) -> None:
                    help="descent from the pose to grip (default: the part's, controller.part)")
     p.add_argument("--object-width-mm", type=float,
                    help="finger width when holding the part (default: the part's)")
+    p.add_argument("--kappa", type=positive_int,
+                   help="the part's rotational symmetry, confirmed (default: the declared one, "
+                        "else found from the part's images)")
     default_offset = ",".join(f"{v:g}" for v in DEFAULT_SIM_START_OFFSET)
     p.add_argument("--start-offset", metavar="DX,DY,DPHI",
                    help="spacenav on the simulated cell: start this far from the grasp pose "

@@ -52,7 +52,10 @@ class CellState:
     grasp_depth_mm: how far to descend along the approach axis from the nominal pose to grip;
     object_width_mm: finger width expected when the part is held;
     source: how the pose was taught (``auto``, ``spacenav``, ``current``);
-    taught_at: UNIX time of the teach-in.
+    taught_at: UNIX time of the teach-in;
+    kappa_found: for a part declared without kappa, what its images showed
+    (``controller.teach.symmetry.SymmetryEvidence.as_dict``: kappa, sure, confidence, the
+    scores); None where kappa was declared or confirmed (and in files written before).
     """
 
     nominal_pose: Pose
@@ -62,6 +65,7 @@ class CellState:
     object_width_mm: float
     source: str
     taught_at: float
+    kappa_found: dict | None = None
 
     def save(self, path: str | Path) -> None:
         """Write the state to ``path`` atomically as JSON, with the format version."""
@@ -106,12 +110,16 @@ class CellState:
                                  f"got {kappa!r}")
             if not isinstance(data["object_kind"], str) or not isinstance(data["source"], str):
                 raise ValueError("object_kind and source: expected strings")
+            found = data.get("kappa_found")
+            if found is not None and not isinstance(found, dict):
+                raise ValueError("kappa_found: expected an object or null")
             return cls(pose, data["object_kind"], kappa,
                        _finite("grasp_depth_mm", data["grasp_depth_mm"],
                                _LIMITS["grasp_depth_mm"], 0.0),
                        _finite("object_width_mm", data["object_width_mm"],
                                _LIMITS["object_width_mm"], 0.0),
-                       data["source"], _finite("taught_at", data["taught_at"], 1e11, 0.0))
+                       data["source"], _finite("taught_at", data["taught_at"], 1e11, 0.0),
+                       found)
         except KeyError as exc:
             raise StateError(f"{path}: malformed cell state: {exc.args[0]!r} is missing") \
                 from exc

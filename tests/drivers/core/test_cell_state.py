@@ -69,3 +69,21 @@ def test_missing_key_not_utf8_and_a_fifo(tmp_path):
 def test_a_good_file_still_loads(tmp_path):
     GOOD.save(tmp_path / "cell.json")
     assert CellState.load(tmp_path / "cell.json") == GOOD
+
+
+def test_a_file_written_before_kappa_was_found_from_images_loads_unchanged(tmp_path):
+    GOOD.save(tmp_path / "cell.json")
+    data = json.loads((tmp_path / "cell.json").read_text())
+    del data["kappa_found"]  # as written before the field existed
+    (tmp_path / "cell.json").write_text(json.dumps(data))
+    assert CellState.load(tmp_path / "cell.json") == GOOD
+
+
+def test_the_kappa_found_round_trips_and_must_be_an_object(tmp_path):
+    found = {"kappa": 4, "sure": True, "confidence": 0.98, "scores_px": [1.2, 0.02],
+             "repeat_px": 0.01, "reason": "the view repeats every 90 deg"}
+    state = CellState(GOOD.nominal_pose, "cross", 4, 5.0, 30.0, "auto", 1.0, found)
+    state.save(tmp_path / "cell.json")
+    assert CellState.load(tmp_path / "cell.json").kappa_found == found
+    assert "kappa_found: expected an object" in _damaged(tmp_path, _with(tmp_path,
+                                                                         kappa_found=4))
