@@ -47,6 +47,7 @@ from controller.systems.estimator import (
     corrective_step,
     full_step,
 )
+from drivers.camera.settle import settled_frame
 from drivers.core.errors import MotionRejectedError
 from drivers.core.pose import ToolStep
 from drivers.interfaces import Arm, Camera, Frame
@@ -347,10 +348,12 @@ class PositioningLoop:
                    self.config.max_loops if max_loops is None else max_loops,
                    [LoopState(0.0, self._error())])
         checks = LoopChecks.for_run(self.config, self.reach_mm)
+        first = True
         while True:
             if self._abort:
                 return run.finish(Outcome.REJECTED, "aborted")
-            look = self._look_once(estimator, run)
+            look = self._look_once(estimator, run, settle=first)
+            first = False
             around = checks.look_around.step(look.tr, checks.reach, look.record,
                                              affordable=run.affords(1.0))
             if around is not None:
@@ -381,10 +384,11 @@ class PositioningLoop:
                 checks.look_around.full_made = True
                 checks.turn.turned(read, look.record.executed)
 
-    def _look_once(self, estimator: Estimator, run: _Run) -> _Look:
-        """Grab a frame and read the translation; the look's record."""
+    def _look_once(self, estimator: Estimator, run: _Run, settle: bool = False) -> _Look:
+        """Grab a frame (``settle``: once the camera's exposure holds, as for a run's first
+        look) and read the translation; the look's record."""
         t0 = time.perf_counter()
-        frame = self.camera.grab()
+        frame = settled_frame(self.camera) if settle else self.camera.grab()
         t1 = time.perf_counter()
         tr = estimator.estimate_translation(frame.image)
         error = run.states[-1].error

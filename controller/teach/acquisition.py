@@ -23,6 +23,7 @@ from calibration_free.dataset import (
     random_offsets,
     staggered_grid_offsets,
 )
+from drivers.camera.settle import settled_frame
 from drivers.core.pose import Pose, ToolStep
 from drivers.interfaces import Arm, Camera
 from drivers.safety import SafetyLimits, split_target
@@ -69,9 +70,10 @@ def acquire(arm: Arm, camera: Camera, nominal: Pose, offsets: np.ndarray, *,
     after one approach share one such error, and NN1's zero pinned on them keeps it; after
     separate approaches their mean averages it. The set's metadata
     ``taught_frames`` says how many come first (the Hough system's PSOM takes the grid's
-    images only)."""
+    images only). The camera's exposure first settles (``drivers.camera.settle``)."""
     images, labels, truth = [], [], []
     t0 = time.perf_counter()
+    settled_frame(camera)  # every image of the set exposed alike
     if taught_frames > 0:
         transfer(arm, nominal, limits)
         for i in range(taught_frames):
