@@ -27,6 +27,7 @@ from calibration_free.localise import (
     localise,
 )
 from calibration_free.outline import MIN_CUT_SHARE, cut_share
+from calibration_free.part_colour import PartColour
 from calibration_free.preprocess import (
     Channel,
     IntensityStats,
@@ -65,7 +66,8 @@ class FrontEnd:
             training images' areas).
         max_elongation: a blob matches only up to this elongation (the part's shape).
         channel: the image the object is binarised in and the ROI is cut from: "max"
-            (normalised max(R, G, B), the paper's) or "saturation".
+            (normalised max(R, G, B), the paper's), "saturation" or "colour" (the part's
+            colour against the table's, ``part_colour``).
         nominal_uv_px: where the part appeared at the taught pose (u, v); of several blobs
             that match the part, one clearly nearest this point is taken. None: several
             matching blobs are ambiguous.
@@ -97,6 +99,8 @@ class FrontEnd:
         edge_fill_holes: with ``edge_gamma``, the centre is that of the part's outer outline,
             its holes counted as part (``ColourEdge.fill_holes``); False in model files
             written before it, which read the holes' rims as edges too.
+        part_colour: the part's and the table's colours the "colour" channel compares
+            (``calibration_free.part_colour``); None for the other channels.
     """
 
     frame_height_px: int
@@ -118,6 +122,7 @@ class FrontEnd:
     turned_outlines_px: tuple[tuple[float, tuple[tuple[float, float], ...]], ...] = ()
     edge_gamma: float = 0.0
     edge_fill_holes: bool = False
+    part_colour: PartColour | None = None
 
     def __post_init__(self) -> None:
         gamma = self.edge_gamma
@@ -163,9 +168,12 @@ class FrontEnd:
             if isinstance(size, bool) or not isinstance(size, int) or size < 1:
                 raise ConfigError(f"front end: {name} must be a whole number >= 1, got "
                                   f"{size!r}")
-        if self.channel not in ("max", "saturation"):
-            raise ConfigError(f"front end: channel must be max or saturation, got "
+        if self.channel not in ("max", "saturation", "colour"):
+            raise ConfigError(f"front end: channel must be max, saturation or colour, got "
                               f"{self.channel!r}")
+        if (self.channel == "colour") != isinstance(self.part_colour, PartColour):
+            raise ConfigError("front end: the colour channel needs the part's colour "
+                              "(part_colour), and only it has one")
         if self.polarity not in ("bright", "dark"):
             raise ConfigError(f"front end: polarity must be bright or dark, got "
                               f"{self.polarity!r}")
@@ -208,6 +216,8 @@ class FrontEnd:
                              f"{image.shape[0]}")
         if self.channel == "saturation":
             return saturation_image(np.ascontiguousarray(image))
+        if self.part_colour is not None:
+            return self.part_colour.image(image)
         return normalise(max_channel_u8(image), self.intensity)
 
     def feature_roi(self, preprocessed: np.ndarray, loc: Localisation,
@@ -344,7 +354,8 @@ class FrontEnd:
         return None if self.taught_area_px is None else area_px / self.taught_area_px
 
     def to_info(self) -> dict[str, Any]:
-        """The JSON a model file stores: keys ``frame_px``, ``intensity``, ``localisation``.
+        """The JSON a model file stores: keys ``frame_px``, ``intensity``, ``localisation``
+        (with ``part_colour`` for the colour channel only).
 
         Returns:
             A JSON-able dict; ``from_info`` reads it back.
@@ -368,15 +379,17 @@ class FrontEnd:
                                  "turned_outlines_px": [[t, [list(p) for p in o]]
                                                         for t, o in self.turned_outlines_px],
                                  "edge_gamma": self.edge_gamma,
-                                 "edge_fill_holes": self.edge_fill_holes}}
+                                 "edge_fill_holes": self.edge_fill_holes,
+                                 **({} if self.part_colour is None
+                                    else {"part_colour": self.part_colour.to_info()})}}
 
     @classmethod
     def from_info(cls, info: Mapping[str, Any]) -> FrontEnd:
         """Inverse of ``to_info``. ``localisation.channel``, ``nominal_uv_px``, ``chroma``,
         ``feature_floor``, ``feature_ceiling``, ``taught_area_px``, ``taught_outline_px``,
-        ``turned_outlines_px``, ``edge_gamma`` and ``edge_fill_holes`` may be absent (model
-        files written before they were stored): "max", None, None, 0, 0, None, None, none, 0
-        and false.
+        ``turned_outlines_px``, ``edge_gamma``, ``edge_fill_holes`` and ``part_colour`` may be
+        absent (model files written before they were stored): "max", None, None, 0, 0, None,
+        None, none, 0, false and None.
 
         Args:
             info: a model file's JSON (at least ``frame_px``, ``intensity``,
@@ -390,6 +403,7 @@ class FrontEnd:
         uv = loc.get("nominal_uv_px")
         chroma = loc.get("chroma")
         taught = loc.get("taught_area_px")
+        colour = loc.get("part_colour")
         return cls(int(info["frame_px"]["height"]), int(info["frame_px"]["width"]),
                    IntensityStats(**info["intensity"]), float(loc["threshold"]),
                    loc["polarity"], float(loc["expected_area_px"]),
@@ -401,7 +415,8 @@ class FrontEnd:
                    float(loc.get("feature_ceiling", 0.0)),
                    None if taught is None else float(taught),
                    loc.get("taught_outline_px"), loc.get("turned_outlines_px", ()),
-                   loc.get("edge_gamma", 0.0), loc.get("edge_fill_holes", False))
+                   loc.get("edge_gamma", 0.0), loc.get("edge_fill_holes", False),
+                   None if colour is None else PartColour.from_info(colour))
 
 
 def _outline(points: Any, name: str) -> tuple[tuple[float, float], ...]:

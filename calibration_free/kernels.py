@@ -365,3 +365,40 @@ def mlp_forward(x: np.ndarray, w0: np.ndarray, b0: np.ndarray, w1: np.ndarray,
             s += w1[o, i] * hidden[i]
         out[o] = s
     return out
+
+
+@njit("float32[:, ::1](uint8[:, :, ::1], float32[::1], float32[::1], float32[:, ::1], "
+      "float32[:, :, ::1], float32[::1], float32)", cache=True, nogil=True, error_model="numpy")
+def colour_likeness(image: np.ndarray, log_lut: np.ndarray, ref: np.ndarray,
+                    means: np.ndarray, icovs: np.ndarray, consts: np.ndarray,
+                    inv_scale: np.float32) -> np.ndarray:  # pragma: no cover
+    """``part_colour.PartColour.image`` in one pass: each pixel's log colour (``log_lut``)
+    over the frame's (``ref``), its log density under Gaussian 0 (the part's) against the
+    largest under the others (the table's: mean, inverse covariance, constant each), through
+    the logistic ``255 / (1 + exp(-ratio * inv_scale))``, the ratio clipped to +-30."""
+    height, width = image.shape[0], image.shape[1]
+    out = np.empty((height, width), np.float32)
+    count = means.shape[0]
+    for i in range(height):
+        for j in range(width):
+            x0 = log_lut[image[i, j, 0]] - ref[0]
+            x1 = log_lut[image[i, j, 1]] - ref[1]
+            x2 = log_lut[image[i, j, 2]] - ref[2]
+            part = np.float32(0.0)
+            table = np.float32(-np.inf)
+            for k in range(count):
+                d0 = x0 - means[k, 0]
+                d1 = x1 - means[k, 1]
+                d2 = x2 - means[k, 2]
+                a = icovs[k]
+                q = (a[0, 0] * d0 * d0 + a[1, 1] * d1 * d1 + a[2, 2] * d2 * d2
+                     + np.float32(2.0) * (a[0, 1] * d0 * d1 + a[0, 2] * d0 * d2
+                                          + a[1, 2] * d1 * d2))
+                density = consts[k] - np.float32(0.5) * q
+                if k == 0:
+                    part = density
+                elif density > table:
+                    table = density
+            ratio = min(max((part - table) * inv_scale, np.float32(-30.0)), np.float32(30.0))
+            out[i, j] = np.float32(255.0) / (np.float32(1.0) + np.exp(-ratio))
+    return out

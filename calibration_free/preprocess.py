@@ -59,8 +59,9 @@ def max_channel_u8(image_rgb: np.ndarray) -> np.ndarray:
     return cv2.max(cv2.max(r, g), b)
 
 
-# The image localisation binarises: the normalised max(R, G, B) (the paper's) or saturation.
-Channel = Literal["max", "saturation"]
+# The image localisation binarises: the normalised max(R, G, B) (the paper's), saturation, or
+# the part's colour against the table's (``calibration_free.part_colour``).
+Channel = Literal["max", "saturation", "colour"]
 
 # Below this max(R, G, B) (grey levels) saturation is divided by the floor instead: in black
 # the ratio is camera noise over almost nothing.

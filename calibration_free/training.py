@@ -40,6 +40,7 @@ from calibration_free.localise import (
 )
 from calibration_free.mlp import TrainedMLP, train_mlp
 from calibration_free.outline import taught_outline, turned_outlines
+from calibration_free.part_colour import PartColour, learn_part_colour
 from calibration_free.pin import pinned
 from calibration_free.preprocess import (
     Channel,
@@ -240,12 +241,13 @@ def _channel_and_polarity(candidates: dict, otsu: dict, sets: dict[str, Dataset]
                           polarity: Polarity | Literal["auto"]) -> tuple[str, Polarity]:
     """The localisation channel and the part's polarity in it: of the channels, the most
     separable one (Otsu) in which, at the taught pose, the part shows as a blob where
-    teach-in put it (``_part_at_centre``) in most frames; of the polarities (``auto``:
-    bright, then dark), the first that does so. Where none does, the most separable channel,
-    bright (training then says what it found instead)."""
+    teach-in put it (``_part_at_centre``) in most frames, the part's colour
+    (``part_colour``) only where neither max(R,G,B) nor saturation does; of the polarities
+    (``auto``: bright, then dark), the first that does so. Where none does, the most
+    separable channel, bright (training then says what it found instead)."""
     frames = _taught_frames(sets)
     polarities: tuple[Polarity, ...] = ("bright", "dark") if polarity == "auto" else (polarity,)
-    for channel in sorted(otsu, key=lambda c: -otsu[c][1]):
+    for channel in sorted(otsu, key=lambda c: (c == "colour", -otsu[c][1])):
         threshold = otsu[channel][0]
         for pol in polarities:
             seen = sum(_part_at_centre(binarise(candidates[channel][name][i], threshold, pol)
@@ -266,9 +268,11 @@ def prepare_training(sets: dict[str, Dataset], polarity: Polarity | Literal["aut
         polarity: "bright" if the object is brighter than the table in the channel, "dark"
             if darker, "auto": found from the frames at the taught pose
             (``_channel_and_polarity``).
-        channel: "max", "saturation", or "auto": the channel in which the part stands out
-            from its background best (Otsu's separability on the training images) and shows
-            where teach-in put it (``_channel_and_polarity``).
+        channel: "max", "saturation", "colour" or "auto": the channel in which the part
+            stands out from its background best (Otsu's separability on the training images)
+            and shows where teach-in put it (``_channel_and_polarity``); where the part is
+            then not found across the grids in it (and ``polarity`` is "auto"), the part's
+            colour.
         edge_gamma: the camera's output gamma: the part's edge is read from the frame's colour
             (``localise.colour_centre``); 0: from the channel's grey levels.
 
@@ -279,13 +283,39 @@ def prepare_training(sets: dict[str, Dataset], polarity: Polarity | Literal["aut
     """
     start = time.perf_counter()
     height, width = _check_sets(sets)
-    intensity, candidates = _channel_images(sets, channel)
+    intensity, candidates, colour = _channel_images(sets, channel)
     otsu = {c: _otsu([n for ns in imgs.values() for n in ns]) for c, imgs in candidates.items()}
+    asked = polarity
     channel, polarity = _channel_and_polarity(candidates, otsu, sets, polarity)
-    threshold = otsu[channel][0]
-    located = candidates[channel]
     logger.info("localisation channel %s, %s part (separability %s)", channel, polarity,
                 ", ".join(f"{c} {v[1]:.2f}" for c, v in otsu.items()))
+    try:
+        front, found, usable = _front_end(sets, candidates[channel], otsu[channel][0], channel,
+                                          polarity, intensity, colour, edge_gamma)
+    except TrainingError as exc:
+        if channel == "colour" or "colour" not in candidates or asked != "auto":
+            raise
+        # the part showed at the taught pose in that channel, but not across the grids
+        logger.info("localisation channel %s: %s; the part's colour instead", channel, exc)
+        channel, polarity = "colour", "bright"
+        front, found, usable = _front_end(sets, candidates[channel], otsu[channel][0], channel,
+                                          polarity, intensity, colour, edge_gamma)
+    return PreparedSets(front, candidates[channel], found, usable,
+                        time.perf_counter() - start)
+
+
+def _front_end(sets: dict[str, Dataset], located: dict[str, list[np.ndarray]],
+               threshold: float, channel: str, polarity: Polarity,
+               intensity: IntensityStats, colour: PartColour | None, edge_gamma: float
+               ) -> tuple[FrontEnd, dict[str, list[Localisation]], dict[str, np.ndarray]]:
+    """The front end trained in one channel (``prepare_training``), the localisation of
+    every image and the usable ones of each set.
+
+    Raises:
+        TrainingError: the object is not found in at least half of a set's images, or the
+            "object" is the table.
+    """
+    height, width = located[next(iter(located))][0].shape
     edge = ColourEdge(edge_gamma, fill_holes=True) if edge_gamma else None
     expected_area, tolerance, max_elongation = _area_and_shape(
         sets, located, threshold, polarity, height * width)
@@ -300,8 +330,8 @@ def prepare_training(sets: dict[str, Dataset], polarity: Polarity | Literal["aut
     blobs = [(sets[name].images[i], _blob_at(located[name][i], threshold, polarity,
                                              found[name][i]))
              for name in sets for i in usable[name]]
-    colour = learn_chroma([im for im, _ in blobs], [b for _, b in blobs])
-    chroma, chroma_tolerance = colour if colour is not None else (None, 0.0)
+    learned = learn_chroma([im for im, _ in blobs], [b for _, b in blobs])
+    chroma, chroma_tolerance = learned if learned is not None else (None, 0.0)
     taught, outline, turned = _taught_view(sets, found, usable)
     front = FrontEnd(height, width, intensity, threshold, polarity, expected_area, tolerance,
                      max_elongation, channel, chroma=chroma, chroma_tolerance=chroma_tolerance,
@@ -309,18 +339,23 @@ def prepare_training(sets: dict[str, Dataset], polarity: Polarity | Literal["aut
                      feature_ceiling=FEATURE_CEILING if channel == "saturation" else 0.0,
                      taught_area_px=float(np.mean(taught)) if taught else None,
                      taught_outline_px=outline, turned_outlines_px=turned,
-                     edge_gamma=float(edge_gamma), edge_fill_holes=bool(edge_gamma))
-    return PreparedSets(front, located, found, usable, time.perf_counter() - start)
+                     edge_gamma=float(edge_gamma), edge_fill_holes=bool(edge_gamma),
+                     part_colour=colour if channel == "colour" else None)
+    return front, found, usable
 
 
 def _channel_images(sets: dict[str, Dataset], channel: Channel | Literal["auto"]
-                    ) -> tuple[IntensityStats, dict[str, dict[str, list[np.ndarray]]]]:
-    """The sets' intensity statistics (of the max-channel images) and each candidate
-    channel's images: ``max`` (normalised max(R,G,B)) and, for ``saturation`` or ``auto``,
-    ``saturation`` (``saturation`` alone for ``saturation``).
+                    ) -> tuple[IntensityStats, dict[str, dict[str, list[np.ndarray]]],
+                               PartColour | None]:
+    """The sets' intensity statistics (of the max-channel images), each candidate
+    channel's images (``channel`` alone, or for ``auto`` ``max`` (normalised max(R,G,B)),
+    ``saturation`` and, where the part's colour stands out at the taught pose, ``colour``)
+    and the part's colour learned there (``part_colour.learn_part_colour``; None where not
+    learned).
 
     Raises:
-        TrainingError: an image is flat.
+        TrainingError: an image is flat; ``colour`` where the part's colour does not stand
+            out at the taught pose.
     """
     split = {name: [max_and_saturation_u8(im) for im in data.images]
              for name, data in sets.items()}
@@ -339,9 +374,19 @@ def _channel_images(sets: dict[str, Dataset], channel: Channel | Literal["auto"]
     if channel in ("saturation", "auto"):
         candidates["saturation"] = {name: [sat.astype(np.float32) for _, sat in pairs]
                                     for name, pairs in split.items()}
-        if channel == "saturation":
-            del candidates["max"]
-    return intensity, candidates
+    colour = None
+    if channel in ("colour", "auto"):
+        colour = learn_part_colour([sets[name].images[i] for name, i in _taught_frames(sets)])
+        if colour is not None:
+            candidates["colour"] = {name: [colour.image(im) for im in data.images]
+                                    for name, data in sets.items()}
+        elif channel == "colour":
+            raise TrainingError("the part's colour does not stand out from the table's at the "
+                                "taught pose; check the scene, or train with another "
+                                "localisation channel")
+    if channel != "auto":
+        candidates = {channel: candidates[channel]}
+    return intensity, candidates, colour
 
 
 def _area_and_shape(sets: dict[str, Dataset], located: dict[str, list[np.ndarray]],

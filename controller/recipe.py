@@ -55,8 +55,10 @@ class PerceptionConfig:
     of kappa 6 or more, the nut, and none for the others,
     ``calibration_free.training.default_nn2_widen_px``);
     localisation_channel: the image the part is localised in (``max``: normalised max(R,G,B),
-    the paper's; ``saturation``: unchanged by light and shadow for a coloured part; ``auto``:
-    whichever separates part and table better in the training images); pca / hough: the
+    the paper's; ``saturation``: unchanged by light and shadow for a coloured part;
+    ``colour``: the part's colour against the table's, learned at the taught pose,
+    ``calibration_free.part_colour``; ``auto``: whichever separates part and table best in
+    the training images); pca / hough: the
     baseline systems' settings (``finepos evaluate --system pca|hough``); align: the
     image-alignment servo's (``--system align``); seed: training seed;
     nn1_uses_nn2_set: also train NN1 on the NN2 grid's images (they cost no extra motion and
@@ -77,7 +79,7 @@ class PerceptionConfig:
     nn2_hidden: tuple[int, ...] = field(default=NN2_HIDDEN, metadata={"min": 1, "max": 4096})
     nn2_weight_decay: float | None = field(default=None, metadata={"min": 0.0})
     nn2_widen_px: float | None = field(default=None, metadata={"min": 0.0, "max": 5.0})
-    localisation_channel: Literal["max", "saturation", "auto"] = "auto"
+    localisation_channel: Literal["max", "saturation", "colour", "auto"] = "auto"
     pca: PcaConfig = PcaConfig()
     hough: HoughConfig = HoughConfig()
     align: AlignConfig = AlignConfig()
