@@ -8,10 +8,12 @@ table's median takes it off. The part's colour is then a point cloud in that spa
 lit differently spread it along the brightness axis) that stays where training saw it.
 
 ``learn_part_colour`` finds the part in the frames taken at the taught pose (the blob that
-stands out from the table's colours where teach-in put it) and fits a Gaussian to its pixels;
-``PartColour.image`` is each pixel's likeness to it: 255 on the part's colour, falling off
-with the Mahalanobis distance (half at ``SCALE`` standard deviations), 0 far from it. A table
-of any texture, the gripper's fingers, a card or a part of another colour all read low.
+stands out from the table's colours where teach-in put it) and fits a Gaussian to its colours
+and up to four to the rest of the frame (the table's texture and shadows, the gripper's
+fingers). ``PartColour.image`` is each pixel's log likelihood ratio, the part's Gaussian
+against the likeliest of the table's, through a logistic: 255 where the part's colour is far
+likelier, 127.5 where both are alike, 0 where the table's is. A card or a part of another
+colour reads low too.
 """
 
 from __future__ import annotations
@@ -39,10 +41,11 @@ LOG_OFFSET = 4.0
 STRIDE = 4
 # The channel's logistic is this many nats of the likelihood ratio wide.
 SCALE = 2.0
-# The brightness axis's standard deviation (log units) added to the part's spread: a face lit
-# otherwise than in training (another lamp direction) changes in brightness, not in colour.
+# The brightness axis's standard deviation (log units) added to every Gaussian's spread: a
+# face or a patch of table lit otherwise than in training (another lamp direction, a shadow)
+# changes in brightness, not in colour.
 BRIGHTNESS_SPREAD = 0.35
-# Added to the part's colour variance on every axis (log units squared): the camera's noise,
+# Added to every Gaussian's variance on every axis (log units squared): the camera's noise,
 # Bayer and JPEG colour artefacts the taught frames may not show.
 NOISE_VARIANCE = 0.02 ** 2
 # The table's colours: the pixels nearest the frame's median, this share of them.

@@ -57,8 +57,9 @@ class PerceptionConfig:
     localisation_channel: the image the part is localised in (``max``: normalised max(R,G,B),
     the paper's; ``saturation``: unchanged by light and shadow for a coloured part;
     ``colour``: the part's colour against the table's, learned at the taught pose,
-    ``calibration_free.part_colour``; ``auto``: whichever separates part and table best in
-    the training images); pca / hough: the
+    ``calibration_free.part_colour``; ``auto``: of max and saturation the one that separates
+    part and table better in the training images, the part's colour where neither shows the
+    part); pca / hough: the
     baseline systems' settings (``finepos evaluate --system pca|hough``); align: the
     image-alignment servo's (``--system align``); seed: training seed;
     nn1_uses_nn2_set: also train NN1 on the NN2 grid's images (they cost no extra motion and
