@@ -4,6 +4,7 @@ and the parts table (``--part all``) runs and reports every part in good and poo
 from __future__ import annotations
 
 import json
+from pathlib import Path
 
 import pytest
 
@@ -105,3 +106,18 @@ def test_evaluate_refuses_a_model_of_another_part(trained, capsys):
     model = trained / "model-gabor.fpm"  # taught on the cube
     assert cli.main(["evaluate", "--part", "nut", "--model", str(model), "--trials", "1"]) == 2
     assert "taught on the cube, not the nut" in capsys.readouterr().err
+
+
+@pytest.mark.slow
+def test_evaluate_takes_a_declared_part_with_its_kappa_found(tmp_path, capsys):
+    example = Path(__file__).resolve().parents[3] / "deploy" / "parts" / "example.yaml"
+    config = tmp_path / "cell.yaml"
+    config.write_text(json.dumps({**SMALL_GRIDS, "parts": {"cross": {
+        "mesh": str(example.parent / "cross.ply"), "grasp_width_mm": 30.0,
+        "grip_below_top_mm": 4.0, "mass_g": 7.0}}}))
+    assert cli.main(["evaluate", "--config", str(config), "--part", "cross", "--trials", "2",
+                     "--no-grasp", "--quiet"]) == 0
+    report = json.loads(capsys.readouterr().out)
+    assert report["object"] == "cross" and report["trials"] == 2
+    bins = report["by_heading"]["bins"]
+    assert bins[-1]["to_deg"] == 90.0  # kappa 4, found at teach-in: a quarter turn's range
