@@ -110,7 +110,9 @@ def test_overlays_fall_on_the_part_on_the_simulated_cell(trained, tmp_path):
                                      ).run(SYSTEMS["gabor"].estimator(model))
     assert result.ok
     looks = read_looks(tmp_path / "sim.mcap")
-    assert len(looks) == len(projected) >= 2
+    # the first look waits for the exposure to settle: its extra grabs are at its pose
+    assert len(projected) > len(looks) >= 2
+    projected = projected[len(projected) - len(looks):]
     frames = _decoded_frames(write_video(looks, tmp_path / "sim.mp4", scale=SCALE))
     assert len(frames) == len(looks)
     for look, frame, (pu, pv) in zip(looks, frames, projected, strict=True):

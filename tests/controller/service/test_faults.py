@@ -242,7 +242,8 @@ def test_camera_stall_mid_positioning_keeps_every_logged_record(tmp_path, short_
 
     def view() -> np.ndarray:
         frames.append(1)
-        camera.stalled = len(frames) >= 4  # the fifth grab gets no frame
+        # the first look takes two frames (the exposure settles); the sixth grab gets none
+        camera.stalled = len(frames) >= 5
         step = arm._pose.tool_step_to(NOMINAL)
         return render(scene, np.array([step.dx_mm, step.dy_mm, step.dphi_deg]))
 
