@@ -56,8 +56,12 @@ def test_a_valid_request_gets_its_defaults():
      "offset[2]: must be within [-180, 180], got 181"),
     ('{"cmd": "train", "args": {"system": "svm"}}', "bad_request",
      "system: one of gabor, pca, hough, align, got 'svm'"),
-    ('{"cmd": "position", "args": {"part": "bolt"}}', "bad_request",
-     "part: one of cube, nut, ledge, screw, got 'bolt'"),
+    # a part the cell does not know is refused by the service, which knows the cell's parts
+    # (tests/controller/service/test_parts.py)
+    ('{"cmd": "position", "args": {"part": 7}}', "bad_request",
+     "part: expected a string, got int"),
+    ('{"cmd": "position", "args": {"part": "' + "b" * 40 + '"}}', "bad_request",
+     "part: longer than 32 characters"),
 ])
 def test_bad_requests_are_refused_with_a_code_and_the_reason(text, code, message):
     with pytest.raises(RequestError) as refused:
