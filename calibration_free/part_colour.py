@@ -50,9 +50,9 @@ BRIGHTNESS_SPREAD = 0.35
 NOISE_VARIANCE = 0.02 ** 2
 # The table's colours: the pixels nearest the frame's median, this share of them.
 TABLE_SHARE = 0.7
-# The part at the taught pose: a blob with at least this many pixels, at most this share of
-# the frame, clear of the frame's border, its centre within CENTRE_RADIUS times the frame's
-# smaller side of the frame's middle (``training._part_at_centre``'s rule).
+# The part at the taught pose lies between the fingers, which the hand camera looks at: a blob
+# with at least this many pixels, at most this share of the frame, clear of the frame's
+# border, its centre within CENTRE_RADIUS times the frame's smaller side of the frame's middle.
 MIN_PART_PX = 50
 MAX_PART_SHARE = 0.5
 CENTRE_RADIUS = 0.3
@@ -226,9 +226,10 @@ def _log_likelihood(values: np.ndarray, c: tuple) -> np.ndarray:
     return c[2] - np.float32(0.5) * np.einsum("hwi,ij,hwj->hw", diff, c[1], diff)
 
 
-def _part_blob(mask: np.ndarray) -> np.ndarray | None:
-    """The blob of ``mask`` where teach-in put the part (the module docstring's rule), the
-    nearest the frame's middle; None if there is none."""
+def taught_blob(mask: np.ndarray) -> np.ndarray | None:
+    """The blob of a uint8 mask where teach-in put the part (``MIN_PART_PX``,
+    ``MAX_PART_SHARE``, ``CENTRE_RADIUS``), the nearest the frame's middle; None if there is
+    none."""
     height, width = mask.shape
     count, labels, stats, centroids = cv2.connectedComponentsWithStats(mask, connectivity=8)
     centre = np.array([(width - 1) / 2.0, (height - 1) / 2.0])
@@ -277,7 +278,7 @@ def part_masks(images: Sequence[np.ndarray]) -> list[np.ndarray | None]:
     for values in (logs @ _CHROMA, logs):
         distance = _outliers(values)
         level = _otsu(distance[:, ::2, ::2].ravel())
-        found = _agreeing([_part_blob((d > level).astype(np.uint8)) for d in distance])
+        found = _agreeing([taught_blob((d > level).astype(np.uint8)) for d in distance])
         if sum(m is not None for m in found) * 2 > len(found):
             break
     return found

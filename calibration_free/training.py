@@ -40,7 +40,7 @@ from calibration_free.localise import (
 )
 from calibration_free.mlp import TrainedMLP, train_mlp
 from calibration_free.outline import taught_outline, turned_outlines
-from calibration_free.part_colour import PartColour, learn_part_colour
+from calibration_free.part_colour import PartColour, learn_part_colour, taught_blob
 from calibration_free.pin import pinned
 from calibration_free.preprocess import (
     Channel,
@@ -100,11 +100,6 @@ NN2_WIDEN_COPIES = 4
 WIDEN_MIN_KAPPA = 6
 # A blob covering more of the image than this is the background, not the object.
 MAX_OBJECT_FRACTION = 0.5
-# At the taught pose the part lies between the fingers, which the hand camera looks at: its
-# blob's centre lies within this fraction of the image's shorter side from the image's middle,
-# and it has at least MIN_TAUGHT_BLOB_PX pixels.
-CENTRE_RADIUS = 0.3
-MIN_TAUGHT_BLOB_PX = 50
 # Margin added to the relative half-range of the training areas (see prepare_training).
 AREA_MARGIN = 0.2
 # Factor on the most elongated training blob: the largest elongation still taken for the part.
@@ -219,22 +214,9 @@ def _taught_frames(sets: dict[str, Dataset]) -> list[tuple[str, int]]:
 
 
 def _part_at_centre(mask: np.ndarray) -> bool:
-    """Whether a binary mask holds the part where teach-in put it: a blob within
-    ``CENTRE_RADIUS`` of the image's middle (the hand camera looks between the fingers),
-    clear of the image's border and smaller than ``MAX_OBJECT_FRACTION`` of the image."""
-    height, width = mask.shape
-    count, labels, stats, centroids = cv2.connectedComponentsWithStats(mask, connectivity=8)
-    centre = np.array([(width - 1) / 2.0, (height - 1) / 2.0])
-    reach = CENTRE_RADIUS * min(height, width)
-    for k in range(1, count):
-        x, y, w, h, area = stats[k]
-        if area < MIN_TAUGHT_BLOB_PX or area > MAX_OBJECT_FRACTION * height * width:
-            continue
-        if x == 0 or y == 0 or x + w == width or y + h == height:
-            continue
-        if np.hypot(*(centroids[k] - centre)) <= reach:
-            return True
-    return False
+    """Whether a binary mask holds the part where teach-in put it: a blob near the image's
+    middle, which the hand camera looks at between the fingers (``part_colour.taught_blob``)."""
+    return taught_blob(mask) is not None
 
 
 def _channel_and_polarity(candidates: dict, otsu: dict, sets: dict[str, Dataset],
