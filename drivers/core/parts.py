@@ -100,8 +100,8 @@ class PartDeclaration:
     jaw_opening_mm: how wide the jaws open before the descent, at most the gripper's 40 mm
     and above the grasp width (null: the grasp width plus 1.5 mm either side);
     mass_g: the part's mass (what the grasp's weight check expects); material: what it is
-    made of (the simulated part's friction); color: its usual colour (RGB 0..1; the
-    simulated table's part takes ``scene.object.color``); kappa: its rotational symmetry
+    made of (the simulated part's friction); color: its colour (RGB 0..1), as the simulated
+    cell paints it unless ``scene.object.color`` is set; kappa: its rotational symmetry
     about the vertical as the hand camera sees it (null: teach-in finds it from the part's
     images).
     """

@@ -30,7 +30,7 @@ class ObjectConfig:
     """The part to grasp: its kind, colour (RGB 0..1) and where it lies on the table.
 
     kind: a built-in part (cube | nut | ledge | screw) or one the cell config declares under
-    ``parts``; color: the colour the part is painted in (the same for every part unless set).
+    ``parts``; color: the colour the part is painted in (unset: the part's own ``color``).
 
     x_mm, y_mm: position in the robot's base frame; phi_deg: rotation about the vertical.
     The ranges keep the pre-grasp pose, 30 mm around it at any rotation and the grasp itself
@@ -38,7 +38,7 @@ class ObjectConfig:
     """
 
     kind: str = "cube"
-    color: tuple[float, float, float] = field(default=(1.0, 0.85, 0.1), metadata=_UNIT_RANGE)
+    color: tuple[float, float, float] | None = field(default=None, metadata=_UNIT_RANGE)
     x_mm: float = field(default=300.0, metadata={"min": 220.0, "max": 340.0})
     y_mm: float = field(default=0.0, metadata={"min": -100.0, "max": 100.0})
     phi_deg: float = field(default=0.0, metadata={"min": -360.0, "max": 360.0})

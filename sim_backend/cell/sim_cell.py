@@ -220,7 +220,7 @@ class SimCell:
         self._robot = robot_model.build_robot(cid, palette)
         self._jaws = grasp_physics.setup(cid, self._robot.body_id, self._table_id,
                                          self.part.friction)
-        color = self.scene.object.color
+        color = self.scene.object.color or self.part.color
         self._part = _Item(self._part_body(self.part, color), np.eye(4), LABEL_PART)
         # The part is a dynamic body: it moves by itself only while a grasp steps the physics.
         grasp_physics.make_dynamic(cid, self._part.body_id, self.part.mass_g / 1000.0,

@@ -53,6 +53,24 @@ def test_a_declared_part_is_seen_and_grasped_and_held(kind, symmetry, pieces):
         assert cell.holding
 
 
+def test_a_declared_part_is_painted_in_its_own_colour_unless_the_scene_sets_one():
+    parts = load_parts(EXAMPLE)
+    assert parts["bracket"].color == (0.2, 0.4, 0.85)
+
+    def mean_part_rgb(scene: SceneConfig):
+        with SimCell(scene, seed=1, parts=parts) as cell:
+            image, mask = cell.render(), cell.render_labels() == LABEL_PART
+            return image[mask].mean(axis=0)
+
+    own = mean_part_rgb(_scene("bracket"))
+    assert own[2] > own[0] + 40  # blue
+    painted = _scene("bracket")
+    painted = dataclasses.replace(painted, object=dataclasses.replace(
+        painted.object, color=(1.0, 0.85, 0.1)))
+    scene_colour = mean_part_rgb(painted)
+    assert scene_colour[0] > scene_colour[2] + 40  # the scene's yellow
+
+
 def test_a_part_the_cell_does_not_know_or_without_its_mesh_gets_one_line(tmp_path):
     with pytest.raises(ConfigError, match=r"^unknown part 'bracket' \(known parts: cube, nut, "
                                           r"ledge, screw; declare"):

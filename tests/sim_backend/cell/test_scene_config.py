@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+import dataclasses
+
 import pytest
 
 from drivers.core.errors import ConfigError
@@ -30,9 +32,12 @@ scene:
 def test_defaults_are_the_issue_example(tmp_path):
     path = tmp_path / "finepos.yaml"
     path.write_text(ISSUE_EXAMPLE)
-    assert load_scene(path) == SceneConfig()
     scene = SceneConfig()
-    assert scene.object.kind == "cube" and scene.object.color == (1.0, 0.85, 0.1)
+    assert load_scene(path) == dataclasses.replace(
+        scene, object=dataclasses.replace(scene.object, color=(1.0, 0.85, 0.1)))
+    # unset, the cell paints the part in its own colour: the cube's is the example's
+    assert scene.object.kind == "cube" and scene.object.color is None
+    assert PARTS["cube"].color == (1.0, 0.85, 0.1)
     assert scene.table.texture == "none" and scene.lighting.preset == "good"
     assert scene.camera.noise_std == 2.0 and scene.clutter.count == 0
 

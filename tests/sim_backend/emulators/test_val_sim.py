@@ -9,6 +9,7 @@ import signal
 import subprocess
 import sys
 import time
+from pathlib import Path
 
 import pytest
 
@@ -98,3 +99,13 @@ def test_cli_serves_until_sigterm(transport):
         finally:
             if process.poll() is None:
                 process.kill()
+
+
+def test_the_emulated_cell_holds_a_part_its_config_declares(tmp_path):
+    example = Path(__file__).resolve().parents[3] / "deploy" / "parts" / "example.yaml"
+    config = tmp_path / "cell.yaml"
+    config.write_text(example.read_text().replace("mesh: ", f"mesh: {example.parent}/")
+                      + "scene:\n  object: {kind: wedge}\n")
+    with simulated_arm(str(config)) as arm:
+        assert arm.cell.object_kind == "wedge"
+        assert arm.cell.part.color == (0.8, 0.3, 0.2)  # the declared default colour
