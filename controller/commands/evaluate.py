@@ -60,7 +60,10 @@ random directions and heights, brightness from dim to bright, colour temperature
 K, shadow strength), a card over 0-30% of the part and 0-3 other parts on the table. The
 report records every draw and gives the yardstick's figures (safe within 2.5 loops and RMS
 where at least 80% of the part is visible; stops where at least 85% is), its targets, and
-the results by each drawn factor. --workers runs the cells in parallel processes.
+the results by each drawn factor. --workers runs the cells in parallel processes. With
+--rezero (and --rezero-heading-step) the cell's model is re-zeroed before each trial in the
+trial's light, the part lying free, as `finepos rezero` does after the light changed; the
+report's rezero gives the re-zeros refused and their median arm time.
 """
 
 from __future__ import annotations
@@ -182,13 +185,13 @@ def _evaluate_randomized(args, config) -> int:
         if getattr(args, option, None) is not None:
             raise ConfigError(f"--{option.replace('_', '-')}: not with --randomize (every cell "
                               "and its light are drawn)")
-    for flag in ("hil", "rezero"):
-        if getattr(args, flag):
-            raise ConfigError(f"--{flag}: not with --randomize")
+    if args.hil:
+        raise ConfigError("--hil: not with --randomize")
     report = evaluate_randomized(args.system, config, trials=args.trials, seed=args.seed,
                                  trials_per_cell=args.trials_per_cell or TRIALS_PER_CELL,
                                  grasp=not args.no_grasp, workers=args.workers,
-                                 progress=not args.quiet)
+                                 progress=not args.quiet, rezero=args.rezero,
+                                 rezero_heading_step=args.rezero_heading_step)
     report["command"] = command_of(args)
     write_json(args.json, report)
     return 0

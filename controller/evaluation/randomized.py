@@ -29,7 +29,7 @@ from controller.config import with_part
 from controller.evaluation.comparison.pools import Tick, open_pool
 from controller.evaluation.metrics import is_safe, loops_to_safe, state_at, wilson
 from controller.evaluation.mounts import random_camera
-from controller.evaluation.trials import run_trials, train_systems_on_cell
+from controller.evaluation.trials import rezeroed_on, run_trials, train_systems_on_cell
 from controller.loop.checks import STOPPED
 from controller.systems.registry import SYSTEMS
 from drivers.core.errors import FineposError
@@ -276,6 +276,8 @@ class _CellJob:
     cell: CellDraw
     trials: tuple[TrialDraw, ...]
     grasp: bool
+    rezero: bool = False
+    rezero_heading_step: float | None = None
 
 
 def _run_cell(job: _CellJob, tick: Tick) -> dict:
@@ -298,8 +300,11 @@ def _run_cell(job: _CellJob, tick: Tick) -> dict:
             return {"cell": cell.index, "fixed_gain": gain, "train_seconds": None,
                     "train_error": str(exc), "records": records}
         train_s = time.perf_counter() - t0
-        model = models[job.system]
+        trained = models[job.system]
         for trial in job.trials:
+            model, rezero = trained, None
+            if job.rezero:
+                model, rezero = _rezeroed(job, trained, camera, trial, Path(tmp) / "rezero")
             trial_cfg = cell_config(job.config, cell, trial.light, trial.occluder, trial.clutter)
             trial_cfg = dataclasses.replace(trial_cfg, scene=dataclasses.replace(
                 trial_cfg.scene, camera=camera))
@@ -307,10 +312,27 @@ def _run_cell(job: _CellJob, tick: Tick) -> dict:
                              work_dir=Path(tmp) / "eval", grasp=job.grasp, progress=False,
                              measure_visible=True)
             states = run["states"][0]
-            records.append(_trial_record(cell, trial, states, run))
+            record = _trial_record(cell, trial, states, run)
+            records.append(record if rezero is None else {**record, "rezero": rezero})
             tick()
     return {"cell": cell.index, "fixed_gain": gain, "train_seconds": train_s,
             "train_error": None, "records": records}
+
+
+def _rezeroed(job: _CellJob, model, camera, trial: TrialDraw, work_dir: Path
+              ) -> tuple[object, dict]:
+    """The cell's model re-zeroed at the taught pose in the trial's light, as a user runs
+    ``finepos rezero`` after the light changed (the part lying free: no card, no clutter),
+    and what it cost and moved (``error``: the re-zero refused; the trial then runs with the
+    model as trained)."""
+    config = cell_config(job.config, job.cell, trial.light)
+    config = dataclasses.replace(config, scene=dataclasses.replace(config.scene, camera=camera))
+    try:
+        rezeroed, report = rezeroed_on(model, config, work_dir, trial.seed,
+                                       heading_step_deg=job.rezero_heading_step)
+    except FineposError as exc:
+        return model, {"error": str(exc), "cell_seconds": None}
+    return rezeroed, {"error": None, "cell_seconds": report.get("cell_seconds")}
 
 
 def _trial_record(cell: CellDraw, trial: TrialDraw, states, run: dict) -> dict:
@@ -354,10 +376,13 @@ def draw_plan(config, *, trials: int, seed: int, trials_per_cell: int
 
 def evaluate_randomized(system: str, config, *, trials: int, seed: int,
                         trials_per_cell: int = TRIALS_PER_CELL, grasp: bool = True,
-                        workers: int = 1, progress: bool = True) -> dict:
+                        workers: int = 1, progress: bool = True, rezero: bool = False,
+                        rezero_heading_step: float | None = None) -> dict:
     """The ``finepos evaluate --randomize`` report (module docstring): every cell's and
     trial's draw, each trial's result, the yardstick's figures and targets, and the results
-    by drawn factor.
+    by drawn factor. ``rezero``: before each trial the cell's model is re-zeroed in the
+    trial's light (``rezero_heading_step``: also by heading); the report's ``rezero`` says
+    how often that was refused and the arm time it took.
 
     Raises:
         FineposError: an unknown system, or no trials.
@@ -369,7 +394,8 @@ def evaluate_randomized(system: str, config, *, trials: int, seed: int,
     t0 = time.perf_counter()
     config = with_part(config, config.scene.object.kind)
     plan = draw_plan(config, trials=trials, seed=seed, trials_per_cell=trials_per_cell)
-    jobs = [_CellJob(system, config, cell, draws, grasp) for cell, draws in plan]
+    jobs = [_CellJob(system, config, cell, draws, grasp, rezero, rezero_heading_step)
+            for cell, draws in plan]
     with open_pool(min(workers, len(jobs))) as pool:
         results = pool.run(_run_cell, jobs, weights=[len(j.trials) for j in jobs],
                            desc=f"randomized {system}", unit="trial", progress=progress)
@@ -382,7 +408,18 @@ def evaluate_randomized(system: str, config, *, trials: int, seed: int,
     return {"system": system, "randomize": True, "object": config.scene.object.kind,
             "trials": trials, "seed": seed, "trials_per_cell": trials_per_cell,
             "grasp": grasp, "wall_seconds": time.perf_counter() - t0,
+            "rezero": _rezero_summary(records) if rezero else None,
+            "rezero_heading_step": rezero_heading_step,
             **summarise_randomized(records, cells), "cells": cells, "trial_records": records}
+
+
+def _rezero_summary(records: list[dict]) -> dict:
+    """How many re-zeros were refused, and the median arm time of those made (cell s)."""
+    made = [r["rezero"] for r in records if r.get("rezero") and r["rezero"]["error"] is None]
+    seconds = [m["cell_seconds"] for m in made if m["cell_seconds"] is not None]
+    return {"trials": sum(1 for r in records if r.get("rezero")),
+            "refused": sum(1 for r in records if r.get("rezero") and r["rezero"]["error"]),
+            "cell_seconds_median": float(np.median(seconds)) if seconds else None}
 
 
 def _rates(records: list[dict]) -> dict:

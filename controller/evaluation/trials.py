@@ -116,7 +116,8 @@ def rezeroed_on(model: TrainedModel, config, work_dir: Path, seed: int, hil: boo
                 heading_step_deg: float | None = None) -> tuple[TrainedModel, dict]:
     """The model re-zeroed (``FinePositioner.rezero``) on ``config``'s cell, in its light:
     the part where the scene puts it, the arm at its true grasp pose (``teach_auto``).
-    ``heading_step_deg``: also its zero by heading, in steps of at most that, over the
+    The report is ``FinePositioner.rezero``'s and ``cell_seconds``, the arm time the re-zero
+    took. ``heading_step_deg``: also its zero by heading, in steps of at most that, over the
     default range, one symmetry period centred on the taught heading: where the trials' tool
     ends (the simulated cell's grasp pose is the one of the part's symmetric turns nearest the
     taught one).
@@ -132,7 +133,9 @@ def rezeroed_on(model: TrainedModel, config, work_dir: Path, seed: int, hil: boo
         fp = FinePositioner(devices, config, state_dir=work_dir)
         fp.teach_auto()
         SYSTEMS[model.system].save(model, fp.model_path(model.system))
-        return fp.rezero(system=model.system, heading_step_deg=heading_step_deg)
+        start = devices.clock()
+        model, report = fp.rezero(system=model.system, heading_step_deg=heading_step_deg)
+        return model, {**report, "cell_seconds": devices.clock() - start}
 
 
 def run_trials(system: str, model: TrainedModel, config, trials: int, seed: int, *,

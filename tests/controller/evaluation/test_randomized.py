@@ -96,7 +96,7 @@ def test_an_untrained_cell_counts_against_every_figure_but_the_rms():
 
 @pytest.mark.parametrize("args, message", [
     (["--randomize", "--lighting", "poor"], "--lighting: not with --randomize"),
-    (["--randomize", "--rezero"], "--rezero: not with --randomize"),
+    (["--randomize", "--hil"], "--hil: not with --randomize"),
     (["--trials-per-cell", "3"], "--trials-per-cell: only with --randomize"),
     (["--workers", "2"], "--workers: only with --part all or --randomize"),
 ])
@@ -123,3 +123,23 @@ def test_a_small_seeded_randomized_run_reports_its_draws_and_figures(tmp_path, c
     assert set(report["by_factor"]) >= {"gamma", "lamps", "occluder", "clutter", "part_hue"}
     assert set(report["targets"]) == {"safe_2.5_visible", "rms_2.5_visible", "class_safe",
                                       "stops_visible"}
+
+
+@pytest.mark.slow
+def test_a_randomized_run_can_rezero_before_each_trial_and_says_what_it_cost(tmp_path):
+    out = tmp_path / "random.json"
+    argv = ["evaluate", "--randomize", "--rezero", "--trials", "1", "--seed", "4",
+            "--no-grasp", "--quiet", "--json", str(out)]
+    assert main(argv) == 0
+    report = json.loads(out.read_text())
+    (record,) = report["trial_records"]
+    made = record["rezero"]
+    assert report["rezero"]["trials"] == 1
+    assert report["rezero"]["refused"] == (made["error"] is not None)
+    # a re-zero refused (the part not seen whole in the trial's light) leaves the model as
+    # trained, and the trial runs with it
+    assert record["outcome"] != "untrained" and 0.0 <= record["visible"] <= 1.0
+    if made["error"] is None:
+        assert made["cell_seconds"] > 0.0
+    else:
+        assert made["error"].startswith("rezero: ")
