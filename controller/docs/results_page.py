@@ -52,17 +52,19 @@ def load_reports(folder: str | Path) -> list[tuple[str, dict]]:
     return found
 
 
-def _reports(data: Any) -> Iterator[dict]:
-    """The evaluate reports in a file's JSON: one, a list of them, or a mapping of them."""
+def _reports(data: Any, command: str | None = None) -> Iterator[dict]:
+    """The evaluate reports in a file's JSON: one, a list of them, or a mapping of them (the
+    rows of ``evaluate --part all``: each without a command of its own takes the one of the
+    report holding it)."""
     if isinstance(data, dict) and (("rms" in data and "safe_rate" in data)
                                    or data.get("randomize") is True):
-        yield data
+        yield data if data.get("command") or command is None else {**data, "command": command}
     elif isinstance(data, dict):
         for value in data.values():
-            yield from _reports(value)
+            yield from _reports(value, data.get("command") or command)
     elif isinstance(data, list):
         for value in data:
-            yield from _reports(value)
+            yield from _reports(value, command)
 
 
 def row(report: dict) -> list[str]:

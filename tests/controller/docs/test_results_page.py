@@ -64,6 +64,16 @@ def test_reports_in_a_list_or_mapping_are_each_a_row(tmp_path):
     assert len(results_page.load_reports(tmp_path)) == 2
 
 
+def test_the_rows_of_a_parts_table_take_its_command(tmp_path):
+    report = json.loads((FIXTURES / "evaluate-report.json").read_text(encoding="utf-8"))
+    del report["command"]
+    table = {"system": "gabor", "rows": [report, {**report, "lighting": "poor"}],
+             "command": "finepos evaluate --part all --trials 2 --seed 3 --no-grasp"}
+    (tmp_path / "parts.json").write_text(json.dumps(table), encoding="utf-8")
+    found = results_page.load_reports(tmp_path)
+    assert [r["command"] for _, r in found] == [table["command"]] * 2
+
+
 def test_a_report_without_its_command_is_refused(tmp_path):
     report = json.loads((FIXTURES / "evaluate-report.json").read_text(encoding="utf-8"))
     del report["command"]
