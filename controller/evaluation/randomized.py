@@ -249,7 +249,7 @@ def settled_exposure(config, seed: int) -> float:
     camera = config.scene.camera
     auto = dataclasses.replace(camera, exposure=dataclasses.replace(camera.exposure, auto=True))
     scene = dataclasses.replace(config.scene, camera=auto)
-    with SimCell(scene, seed=seed) as cell:
+    with SimCell(scene, seed=seed, parts=config.parts) as cell:
         for _ in range(EXPOSURE_SETTLE_FRAMES):
             cell.render()
         return cell.exposure_factor

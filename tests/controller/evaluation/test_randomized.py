@@ -1,14 +1,17 @@
 """``finepos evaluate --randomize``: the drawn cells and trials, and the yardstick's report."""
 
 import json
+from pathlib import Path
 
 import numpy as np
 import pytest
 
 from controller.cli import main
-from controller.config import load_config
+from controller.config import load_config, with_part
 from controller.evaluation import randomized as rz
 from sim_backend.cell.optics import resolve_camera
+
+ROOT = Path(__file__).resolve().parents[3]
 
 
 def _plan(seed, trials=12, per_cell=4):
@@ -143,3 +146,9 @@ def test_a_randomized_run_can_rezero_before_each_trial_and_says_what_it_cost(tmp
         assert made["cell_seconds"] > 0.0
     else:
         assert made["error"].startswith("rezero: ")
+
+
+def test_a_part_the_config_declares_is_exposed_for_on_its_drawn_cell():
+    config = with_part(load_config(ROOT / "deploy" / "parts" / "example.yaml"), "wedge")
+    cell, _ = rz.draw_plan(config, trials=1, seed=5, trials_per_cell=1)[0]
+    assert rz.settled_exposure(rz.cell_config(config, cell, cell.train_light), 1) > 0.0
