@@ -13,6 +13,7 @@ from __future__ import annotations
 import enum
 import logging
 import math
+import threading
 from abc import ABC, abstractmethod
 from collections.abc import Callable
 from dataclasses import dataclass
@@ -217,7 +218,8 @@ class Arm(Device):
         return False
 
     def guarded_descent(self, via: Pose, target: Pose, guard_speed_percent: float,
-                        guard_mm: float, lift_mm: float | None = None) -> Descent:
+                        guard_mm: float, lift_mm: float | None = None,
+                        ready: Callable[[], object] | None = None) -> Descent:
         """Open the jaws as the arm starts, move to ``via`` at the set speed, on along the
         approach axis for ``guard_mm`` at ``guard_speed_percent`` of it, and the rest of the
         way to ``target`` at the set speed again, stopping at once wherever the contact input
@@ -225,6 +227,11 @@ class Arm(Device):
         the same command then closes the jaws at ``target`` (waiting the hand time) and lifts
         ``lift_mm`` back along the approach axis, the input still armed: high after the close
         (a finger pushing on the part), the lift stops or never starts.
+
+        ``ready`` (e.g. ``GuardSetup.wait``: the wrist sensor's bias and monitor condition
+        under way on its own line) is called once before the command that starts the run,
+        after what goes on the arm's line before it (VAL: the locations): its error ends the
+        descent with nothing moved; a halt meanwhile refuses it.
 
         Every pose passes the safety layer first (rejected, nothing moves, when one is beyond
         it). Raises MotionRejectedError when the input is already high (nothing moves), or
@@ -253,7 +260,7 @@ class Arm(Device):
         self._reached, self._move_start = None, current
         try:
             descent = self._guarded_descent(via, target, guard_speed_percent, guard_mm,
-                                            lift_mm)
+                                            lift_mm, ready or _nothing)
         finally:
             self._move_start = None
         self._reached = descent.pose
@@ -292,8 +299,10 @@ class Arm(Device):
         return self.pose(fresh=False), stop()
 
     def _guarded_descent(self, via: Pose, target: Pose, guard_speed_percent: float,
-                         guard_mm: float, lift_mm: float | None) -> Descent:
-        """Backends that run programs implement this (see ``guarded_descent``)."""
+                         guard_mm: float, lift_mm: float | None,
+                         ready: Callable[[], object]) -> Descent:
+        """Backends that run programs implement this (see ``guarded_descent``); they call
+        ``ready()`` once, before the command that starts the run."""
         raise MotionRejectedError(f"{type(self).__name__} runs no guarded descent")
 
     def set_speed(self, percent: float) -> None:
@@ -458,6 +467,55 @@ class MonitorCondition:
         return value > self.limit if self.op == ">" else value < self.limit
 
 
+class GuardSetup:
+    """A wrist sensor's guard set-up (``WrenchSensor.prepare_contact_guard``): done at once,
+    or with ``background`` under way in a thread of its own (the sensor's own line, while the
+    caller's thread talks to the arm). ``on_wait`` runs once in the first ``wait`` (a
+    simulated sensor charges there what is left of its time).
+
+    wait(): blocks until it is done, then returns the mean read (None: none asked for) or
+    raises the error that ended it; join(): blocks until it is done, never raises;
+    background: whether it ran (or runs) in a thread of its own.
+    """
+
+    def __init__(self, work: Callable[[], Wrench | None], background: bool = False,
+                 on_wait: Callable[[], None] | None = None) -> None:
+        self._mean: Wrench | None = None
+        self._error: BaseException | None = None
+        self._done = threading.Event()
+        self._on_wait = on_wait
+        self.background = background
+        if background:
+            threading.Thread(target=self._run, args=(work,), name="wrench-guard-setup",
+                             daemon=True).start()
+        else:
+            self._run(work)
+
+    def _run(self, work: Callable[[], Wrench | None]) -> None:
+        try:
+            self._mean = work()
+        except BaseException as exc:  # handed to the waiting thread by wait()
+            self._error = exc
+        finally:
+            self._done.set()
+
+    def wait(self) -> Wrench | None:
+        self._done.wait()
+        on_wait, self._on_wait = self._on_wait, None
+        if on_wait is not None:
+            on_wait()
+        if self._error is not None:
+            raise self._error
+        return self._mean
+
+    def join(self) -> None:
+        self._done.wait()
+
+
+def _nothing() -> None:
+    """A guarded descent's ``ready`` when the caller gives none."""
+
+
 class WrenchSensor(Device):
     """A 6-axis wrist force-torque sensor."""
 
@@ -485,6 +543,31 @@ class WrenchSensor(Device):
 
     def _set_monitor_condition(self, condition: MonitorCondition | None) -> None:
         raise DeviceFaultError(f"{type(self).__name__} has no monitor output")
+
+    def prepare_contact_guard(self, condition: MonitorCondition,
+                              samples: int | None = None) -> GuardSetup:
+        """What a guarded descent needs from the sensor before the arm's first motion: the
+        bias (the load at rest as zero), ``condition`` on the sensor's output
+        (``set_monitor_condition``) and, with ``samples``, the mean of that many samples
+        (``read_mean``, after the bias). A sensor on a line of its own does it in the
+        background (``GuardSetup.background``) while the caller talks to the arm; the caller
+        uses the sensor for nothing else until ``GuardSetup.wait`` or ``join`` returned. The
+        arm must stand still until then (the bias and the mean are of the load at rest)."""
+        self._require_connected()
+        if samples is not None and samples < 1:
+            raise ValueError(f"samples must be >= 1, got {samples}")
+        return self._prepare_contact_guard(condition, samples)
+
+    def _prepare_contact_guard(self, condition: MonitorCondition,
+                               samples: int | None) -> GuardSetup:
+        """This default does it at once, in the caller's thread."""
+        return GuardSetup(lambda: self._contact_guard_steps(condition, samples))
+
+    def _contact_guard_steps(self, condition: MonitorCondition,
+                             samples: int | None) -> Wrench | None:
+        self._bias()
+        self._set_monitor_condition(condition)
+        return self._read_mean(samples) if samples is not None else None
 
     def read(self) -> Wrench:
         """One biased reading."""

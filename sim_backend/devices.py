@@ -44,6 +44,7 @@ from drivers.interfaces import (
     Camera,
     Descent,
     Frame,
+    GuardSetup,
     MonitorCondition,
     Wrench,
     WrenchSensor,
@@ -70,6 +71,12 @@ _IDEAL_FAST_WATCH_STEP_MM = 5.0
 _SET_LINE_CHARS = 57
 _DESCENT_LINE = "ex fpdesc"
 _GRIP_LINE = "ex fpgrip"  # the descent, then the close and the lift in the same run
+# The ATI line's bytes of a mean (``SA n``, ``QR`` and its record, ``SA`` set back), of ``SB``
+# (the line, its echo, the prompt) and of the monitor condition's line as the ATI driver's
+# defaults send it (``MC FZ LT -60 1``).
+_ATI_MEAN_BYTES = 2 * cell_timing.ATI_SA_BYTES + cell_timing.ATI_QR_BYTES
+_ATI_BIAS_BYTES = 3 + 4 + 1
+_ATI_CONDITION_BYTES = 15 + 16 + 1
 
 
 @dataclass
@@ -291,9 +298,10 @@ class SimArm(Arm):
             yield last
 
     def _guarded_descent(self, via: Pose, target: Pose, guard_speed_percent: float,
-                         guard_mm: float, lift_mm: float | None) -> Descent:
-        """In process, as the VAL driver's program path: the target lines and ``ex fpdesc``
-        (with ``lift_mm``: ``ex fpgrip``) on the VAL line, the jaws opening as the arm
+                         guard_mm: float, lift_mm: float | None,
+                         ready: Callable[[], object]) -> Descent:
+        """In process, as the VAL driver's program path: the target lines, ``ready()``, and
+        ``ex fpdesc`` (with ``lift_mm``: ``ex fpgrip``) on the VAL line, the jaws opening as the arm
         starts, the first motion with its set-up, the guarded one at the guard speed and the
         rest without, settling where the arm stops (at the target, or on contact); with
         ``lift_mm`` then the close (the hand time) and the lift without a set-up of its own,
@@ -302,9 +310,11 @@ class SimArm(Arm):
         timing = self.timing
         wire = contact_wire(self.cell)
         if timing is not None:
-            lines = [cell_timing.val_exchange_bytes("x" * _SET_LINE_CHARS)] * 2
+            timing.val_wire(2 * cell_timing.val_exchange_bytes("x" * _SET_LINE_CHARS))
+        ready()
+        if timing is not None:
             line = _GRIP_LINE if lift_mm is not None else _DESCENT_LINE
-            timing.val_wire(sum(lines) + cell_timing.val_exchange_bytes(line, 3))
+            timing.val_wire(cell_timing.val_exchange_bytes(line, 3))
         if wire.high():
             raise MotionRejectedError("the contact input is high before the descent")
         self.cell.open_gripper()
@@ -472,12 +482,43 @@ class SimWrenchSensor(WrenchSensor):
         them only."""
         timing = self.timing
         if timing is not None:
-            period = 1.0 / timing.config.wrench_rate_hz
-            ready = timing.at_rest_s + samples * period
-            timing.wait(ready - timing.clock.now(), "sensor")
-            timing.wait((-timing.clock.now()) % period, "sensor")
-            timing.wire(2 * cell_timing.ATI_SA_BYTES + cell_timing.ATI_QR_BYTES,
-                        timing.config.ati_baud)
+            timing.wait(self._mean_ready_s(samples, timing.clock.now()) - timing.clock.now(),
+                        "sensor")
+            timing.wire(_ATI_MEAN_BYTES, timing.config.ati_baud)
+        return self._mean(samples)
+
+    def _mean_ready_s(self, samples: int, now_s: float) -> float:
+        """When the mean of ``samples`` samples since the arm came to rest can be asked for,
+        from ``now_s`` on: the last of them taken, at a sample's time."""
+        period = 1.0 / self.timing.config.wrench_rate_hz
+        ready = max(now_s, self.timing.at_rest_s + samples * period)
+        return ready + (-ready) % period
+
+    def _prepare_contact_guard(self, condition: MonitorCondition,
+                               samples: int | None) -> GuardSetup:
+        """On the virtual clock, as the ATI driver's thread on the sensor's own line: the
+        bias, the condition and the mean take their time from now on (``SB`` and the
+        condition's line, the wait for the mean's samples, its lines), alongside what the
+        caller does meanwhile (the arm's line); ``wait`` waits for what is left of it. The arm
+        stands still until then, so the readings are taken now."""
+        timing = self.timing
+        if timing is None or not timing.clock.virtual:
+            return super()._prepare_contact_guard(condition, samples)
+        config = timing.config
+        now = timing.clock.now()
+        done = now + config.wire_time_s(_ATI_BIAS_BYTES + _ATI_CONDITION_BYTES, config.ati_baud)
+        mean = None
+        if samples is not None:
+            done = self._mean_ready_s(samples, done) + config.wire_time_s(_ATI_MEAN_BYTES,
+                                                                          config.ati_baud)
+        self._bias()
+        self._set_monitor_condition(condition)
+        if samples is not None:
+            mean = self._mean(samples)
+        return GuardSetup(lambda: mean, on_wait=lambda: timing.wait(
+            done - timing.clock.now(), "sensor"))
+
+    def _mean(self, samples: int) -> Wrench:
         # the load at rest plus the mean of ``samples`` noise draws (the contact model once)
         sigma = self.cell.arm_config.wrench_noise_n / math.sqrt(samples)
         noise = self._mean_rng.normal(0.0, 1.0, 6) * np.array([sigma] * 3 + [sigma / 10] * 3)

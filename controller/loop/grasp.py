@@ -42,7 +42,7 @@ import numpy as np
 from controller.loop.guards import Guard, first_tripped
 from drivers.core.errors import MotionRejectedError
 from drivers.core.pose import Pose, ToolStep
-from drivers.interfaces import Arm, Descent, MonitorCondition, WrenchSensor
+from drivers.interfaces import Arm, Descent, MonitorCondition, Wrench, WrenchSensor
 
 GraspCheck = Literal["weight", "width", "both"]
 
@@ -166,8 +166,11 @@ def contact_condition(config: GraspConfig) -> MonitorCondition:
 def mean_force(sensor: WrenchSensor, samples: int) -> np.ndarray:
     """The mean force vector (Fx, Fy, Fz; N, tool frame) of ``samples`` samples: the
     sensor's own moving average where it keeps one (``WrenchSensor.read_mean``: one query)."""
-    mean = sensor.read_mean(samples)
-    return np.array([mean.fx_n, mean.fy_n, mean.fz_n])
+    return _force(sensor.read_mean(samples))
+
+
+def _force(wrench: Wrench) -> np.ndarray:
+    return np.array([wrench.fx_n, wrench.fy_n, wrench.fz_n])
 
 
 def guarded_grasp(arm: Arm, sensor: WrenchSensor, grasp_depth_mm: float,
@@ -199,7 +202,7 @@ def guarded_grasp(arm: Arm, sensor: WrenchSensor, grasp_depth_mm: float,
     start: Pose = arm.pose(fresh=False)
     if not arm.runs_programs:  # the descent program opens them as the arm starts
         arm.open_gripper()
-    sensor.bias()
+        sensor.bias()  # the program path's with its monitor condition, below
     result = GraspResult(False, "")
     depth = 0.0
 
@@ -213,7 +216,6 @@ def guarded_grasp(arm: Arm, sensor: WrenchSensor, grasp_depth_mm: float,
 
     if arm.runs_programs:
         # the controller stops the descent itself on the sensor's output: one command
-        sensor.set_monitor_condition(contact_condition(config))
         fast = min(max(0.0, config.free_descent_mm - config.guard_clearance_mm), grasp_depth_mm)
         lateral = carried if carried is not None else ToolStep()
         via = start.moved_in_tool_frame(dataclasses.replace(lateral, dz_mm=fast))
@@ -222,16 +224,22 @@ def guarded_grasp(arm: Arm, sensor: WrenchSensor, grasp_depth_mm: float,
         # the weight check's reference is then read here (open jaws, no contact, the same
         # approach axis), and the sensor's condition watches the close for a jam
         grip = lift and config.check == "weight" and config.lift_mm > 0
-        reference = mean_force(sensor, config.weight_samples) if grip else None
+        # the bias, the condition and the reference on the sensor's line while the arm's
+        # line carries the descent's locations; the run starts once they are done
+        setup = sensor.prepare_contact_guard(contact_condition(config),
+                                             config.weight_samples if grip else None)
         try:
             descent = arm.guarded_descent(
                 via, target, config.guard_speed_percent,
                 config.free_descent_mm + config.guard_zone_mm - fast,
-                config.lift_mm if grip else None)
+                config.lift_mm if grip else None, ready=setup.wait)
         except MotionRejectedError as exc:
             result.reason = f"descent refused: {exc}"
             logger.warning("grasp: %s", result.reason)
             return result
+        finally:
+            setup.join()
+        reference = _force(setup.wait()) if grip else None
         if carried is not None:
             result.carried_step = dataclasses.replace(carried, dz_mm=0.0)
             if on_carried is not None:

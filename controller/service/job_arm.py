@@ -120,11 +120,12 @@ class PreemptibleArm:
         return self.inner.runs_programs
 
     def guarded_descent(self, via: Pose, target: Pose, guard_speed_percent: float,
-                        guard_mm: float, lift_mm: float | None = None) -> Descent:
+                        guard_mm: float, lift_mm: float | None = None,
+                        ready: Callable[[], object] | None = None) -> Descent:
         """The wrapped arm's guarded descent (``Arm.guarded_descent``), keeping the pose
         reached (refused after ``preempt``)."""
         descent = self._move(lambda: self.inner.guarded_descent(
-            via, target, guard_speed_percent, guard_mm, lift_mm))
+            via, target, guard_speed_percent, guard_mm, lift_mm, ready))
         self._seen(descent.pose)
         return descent
 

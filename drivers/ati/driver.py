@@ -4,7 +4,8 @@ Start-up synchronises with the controller: drain stale bytes until the line is q
 bare ``\\r`` (which also ends a stream a previous client left running) and expect nothing but
 the prompt back, up to three times; then send ``config.startup_commands`` (``CD A``,
 ``CD R``). ``read()`` sends ``QR`` and parses one record; ``bias()`` sends ``SB`` (the
-controller keeps the bias).
+controller keeps the bias); ``prepare_contact_guard`` sends ``SB``, the monitor condition and
+the mean's lines from a thread of its own.
 
 Every exchange waits at most ``config.timeout_s``. A timeout (DeviceTimeoutError), bytes off
 protocol (ProtocolError), a lost link or a nonzero status word (AtiStatusError, a
@@ -35,7 +36,7 @@ from drivers.core.errors import (
     FineposError,
     ProtocolError,
 )
-from drivers.interfaces import MonitorCondition, Wrench, WrenchSensor
+from drivers.interfaces import GuardSetup, MonitorCondition, Wrench, WrenchSensor
 
 logger = logging.getLogger(__name__)
 
@@ -139,6 +140,14 @@ class AtiWrenchSensor(WrenchSensor):
 
     def _bias(self) -> None:
         self._guarded(self._command, "SB")
+
+    def _prepare_contact_guard(self, condition: MonitorCondition,
+                               samples: int | None) -> GuardSetup:
+        """``SB``, the monitor condition and the mean (``SA n``, ``QR``, ``SA``) in a thread of
+        their own: the sensor's serial line is its own, so they run while the caller sends the
+        arm its lines. Each exchange keeps its ``timeout_s``."""
+        return GuardSetup(lambda: self._contact_guard_steps(condition, samples),
+                          background=True)
 
     def _set_monitor_condition(self, condition: MonitorCondition | None) -> None:
         """``monitor_command`` with the threshold in counts (``monitor_clear`` for None)."""

@@ -26,7 +26,7 @@ import contextlib
 import logging
 import math
 import re
-from collections.abc import Iterator
+from collections.abc import Callable, Iterator
 
 from drivers.core.errors import (
     DeviceFaultError,
@@ -204,12 +204,13 @@ class ValArm(Arm):
                                echo=self.config.echo)
 
     def _guarded_descent(self, via: Pose, target: Pose, guard_speed_percent: float,
-                         guard_mm: float, lift_mm: float | None) -> Descent:
-        """``do set`` the two locations, then one ``execute`` of the descent program (with
-        ``lift_mm``, and ``fpgrip`` among the programs: of the one that also closes and
-        lifts); the reaction subroutine's text says the input stopped it, and a ``where``
-        then reads where. An arm that did not move at all met an input already high:
-        refused."""
+                         guard_mm: float, lift_mm: float | None,
+                         ready: Callable[[], object]) -> Descent:
+        """``do set`` the two locations, ``ready()``, then one ``execute`` of the descent
+        program (with ``lift_mm``, and ``fpgrip`` among the programs: of the one that also
+        closes and lifts); the reaction subroutine's text says the input stopped it, and a
+        ``where`` then reads where. An arm that did not move at all met an input already
+        high: refused. A halt before the ``execute`` refuses the descent (nothing sent)."""
         cfg = self.config
         grip = lift_mm is not None and GRIP_PROGRAM in cfg.program_lines
         program = GRIP_PROGRAM if grip else DESCENT_PROGRAM
@@ -218,11 +219,14 @@ class ValArm(Arm):
             self._load_programs(cfg.program_text(guard_speed_percent, round(rest_mm, 2),
                                                  round(lift_mm, 2) if grip else 10.0,
                                                  run=program))
+        halts = self._halts
         start = self._move_start if self._move_start is not None else self._read_pose()
         for name, pose in (("fpa", via), ("fpd", target)):
             self._command_without_output(cfg.commands.set_location.format(name=name,
                                                                           **pose.as_dict()))
-        halts = self._halts
+        ready()  # not a fault of the arm's: its error ends the descent before the run
+        if self._halts != halts:
+            raise MotionRejectedError(f"halted before the {program} program")
         self._gripper_closed = False  # the program opens the jaws as it starts
         line = cfg.commands.execute.format(program=program)
         try:

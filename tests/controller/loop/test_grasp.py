@@ -262,7 +262,8 @@ class ProgramArm(FakeArm):
     def runs_programs(self) -> bool:
         return True
 
-    def _guarded_descent(self, via, target, guard_speed_percent, guard_mm, lift_mm):
+    def _guarded_descent(self, via, target, guard_speed_percent, guard_mm, lift_mm, ready):
+        ready()
         self.runs.append(lift_mm)
         self._move_to(target)
         if lift_mm is None:
