@@ -212,3 +212,28 @@ def test_the_monitor_condition_goes_to_the_controller_in_counts(emulator):
         assert emulator.controller.output_high(1)
         sensor.set_monitor_condition(None)
         assert emulator.controller.conditions == {}
+
+
+def test_the_guard_setup_runs_in_a_thread_of_its_own_and_hands_back_the_mean(emulator):
+    from drivers.interfaces import MonitorCondition
+
+    with make_sensor(emulator) as sensor:
+        setup = sensor.prepare_contact_guard(MonitorCondition("fz_n", "<", -3.0), 16)
+        assert setup.background
+        assert_close(setup.wait(), Wrench(0, 0, 0, 0, 0, 0))  # the mean after the bias
+        assert emulator.controller.conditions == {1: (2, "LT", -60)}
+        assert_close(sensor.read(), Wrench(0, 0, 0, 0, 0, 0))  # the line is free again
+
+
+def test_a_guard_setup_that_fails_raises_at_the_wait_and_faults(emulator):
+    from drivers.interfaces import MonitorCondition
+
+    sensor = make_sensor(emulator, timeout_s=0.3)
+    with sensor:
+        emulator.faults.garbage = True
+        setup = sensor.prepare_contact_guard(MonitorCondition("fz_n", "<", -3.0), 16)
+        setup.join()
+        with pytest.raises(ProtocolError):
+            setup.wait()
+        assert sensor.state is Lifecycle.FAULT
+        emulator.faults.garbage = False

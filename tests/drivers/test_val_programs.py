@@ -126,6 +126,40 @@ def test_abort_stops_the_descent_program_at_once(emulator, backing):
         arm.move_tool(ToolStep(dz_mm=1.0))  # the arm still works after the abort
 
 
+def test_ready_is_waited_for_after_the_locations_and_before_the_run(emulator, backing):
+    with program_arm(emulator) as arm:
+        arm.guarded_descent(down(10.0), down(20.0), 25.0, 4.0)  # programs entered and fitted
+        lines = heard(emulator)
+        seen: list[list[str]] = []
+        arm.guarded_descent(down(20.0), down(30.0), 25.0, 4.0,
+                            ready=lambda: seen.append(list(lines)))
+    assert [[line.split()[0] for line in heard_then] for heard_then in seen] == [["do", "do"]]
+    assert [line.split()[0] for line in lines] == ["do", "do", "ex"]
+
+
+def test_a_failed_ready_ends_the_descent_with_nothing_run(emulator, backing):
+    with program_arm(emulator) as arm:
+        lines = heard(emulator)
+
+        def sensor_lost():
+            raise DeviceFaultError("ATI F/T: serial link lost")
+
+        with pytest.raises(DeviceFaultError, match="ATI"):
+            arm.guarded_descent(down(20.0), down(30.0), 25.0, 4.0, ready=sensor_lost)
+        assert not any(line.startswith("ex ") for line in lines)
+        assert backing.moves == [] and arm.fault_reason is None  # not the arm's fault
+        arm.move_tool(ToolStep(dz_mm=1.0))
+
+
+def test_a_halt_while_ready_is_waited_for_refuses_the_run(emulator, backing):
+    with program_arm(emulator) as arm:
+        lines = heard(emulator)
+        with pytest.raises(MotionRejectedError, match="halted before"):
+            arm.guarded_descent(down(20.0), down(30.0), 25.0, 4.0, ready=arm.halt)
+        assert not any(line.startswith("ex ") for line in lines)
+        assert backing.moves == []
+
+
 def test_without_programs_the_arm_runs_no_descent(emulator):
     with ValArm(ValConfig(port=emulator.url), LIMITS) as arm:
         assert not arm.runs_programs

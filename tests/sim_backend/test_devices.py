@@ -127,3 +127,26 @@ def test_repeatability_is_configurable():
         spread = np.abs(np.array(errors))
         assert spread[:, :2].max() > 0.3 and spread[:, :2].max() <= 1.0 + 1e-9
         assert spread[:, 2].max() > 0.3 and spread[:, 2].max() <= 1.0 + 1e-9
+
+
+def test_the_guard_setup_takes_its_time_alongside_what_the_caller_does(cell):
+    from drivers.core.timing import TimingConfig
+    from drivers.interfaces import MonitorCondition
+    from sim_backend.cell.timing import cell_timing
+
+    timing = cell_timing("realistic", TimingConfig())
+    condition = MonitorCondition("fz_n", "<", -3.0)
+    with SimWrenchSensor(cell, timing) as sensor:
+        timing.at_rest_s = timing.clock.now()
+        setup = sensor.prepare_contact_guard(condition, 16)
+        begun = timing.clock.now()
+        timing.val_wire(250)  # the arm's line meanwhile: 0.26 s, longer than the set-up
+        waited = timing.clock.now()
+        assert abs(setup.wait().fz_n) < 0.1  # the mean after the bias
+        assert timing.clock.now() == waited
+        # alone, the wait is the mean's 16 samples (100 Hz) and the ATI line's exchanges
+        timing.at_rest_s = timing.clock.now()
+        setup = sensor.prepare_contact_guard(condition, 16)
+        assert timing.clock.now() == waited > begun
+        setup.wait()
+        assert 0.16 <= timing.clock.now() - waited < 0.2
