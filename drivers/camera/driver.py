@@ -5,7 +5,9 @@ a frame taken after the arm stopped (never one buffered before, nor one still on
 the stream's encoding, transfer and decoding), converted to 192 x 144 RGB (resized if the source
 differs), stamped with its arrival time. No frame within ``config.timeout_s`` (after the settle
 time) raises DeviceTimeoutError and puts the camera into FAULT until ``reset()`` reopens the
-source. ``stats`` counts frames received, failed reads and frames estimated dropped.
+source. A live source whose reads fail is opened again by the reader by itself
+(``frame_reader``), so a stream that ends and comes back within the timeout gives a late
+frame. ``stats`` counts frames received, failed reads, frames estimated dropped and reopens.
 
 OpenCV's FFmpeg backend (in opencv-python-headless) opens ``multipart/x-mixed-replace`` MJPEG
 streams over HTTP directly, so stream URLs need no separate code path.

@@ -8,6 +8,12 @@ thread only.
 A live source (device, stream) is read continuously, so its buffer never holds stale frames. A
 video file is read one frame per request instead (reading ahead would race to its end; its
 arrival times then follow the requests, so no drops are counted).
+
+A live source whose reads have failed for ``REOPEN_AFTER_S`` since its last frame (a stream
+whose server closed the connection or restarted, a device unplugged and plugged in again) is
+released and opened again on the reader thread, at growing intervals up to ``REOPEN_MAX_S``
+until it opens: a grab waiting meanwhile gets the first frame after it, late rather than
+never.
 """
 
 from __future__ import annotations
@@ -30,16 +36,23 @@ logger = logging.getLogger(__name__)
 
 _RETRY_AFTER_FAILED_READ_S = 0.05  # end of file or broken stream: do not spin
 _JOIN_MARGIN_S = 1.0
+# A live source with no frame for this long, its last read failed, is opened again; the
+# attempts start this far apart and double up to REOPEN_MAX_S.
+REOPEN_AFTER_S = 0.25
+REOPEN_FIRST_S = 0.05
+REOPEN_MAX_S = 1.0
 
 
 @dataclass(frozen=True)
 class FrameStats:
     """received: frames read; failed_reads: reads that returned no image; dropped: frames
-    estimated missing from gaps in the arrival times (see ``DropCounter``)."""
+    estimated missing from gaps in the arrival times (see ``DropCounter``); reopened: times
+    the live source was opened again after its reads failed."""
 
     received: int
     failed_reads: int
     dropped: int
+    reopened: int = 0
 
 
 def to_rgb(image: np.ndarray, width_px: int, height_px: int) -> np.ndarray:
@@ -71,6 +84,7 @@ class FrameReader:
         self._latest: Frame | None = None
         self._received = 0
         self._failed_reads = 0
+        self._reopened = 0
         self._drops = DropCounter(config.gap_factor)
         self._thread = threading.Thread(target=self._run, name="camera-reader", daemon=True)
 
@@ -82,7 +96,8 @@ class FrameReader:
     @property
     def stats(self) -> FrameStats:
         with self._changed:
-            return FrameStats(self._received, self._failed_reads, self._drops.dropped)
+            return FrameStats(self._received, self._failed_reads, self._drops.dropped,
+                              self._reopened)
 
     def start(self) -> None:
         """Open the source (raises DeviceNotConnectedError / DeviceTimeoutError on failure)."""
@@ -117,38 +132,70 @@ class FrameReader:
                            "when that returns", self.config.source)
 
     def _run(self) -> None:
+        capture = self._capture(first=True)
+        self._open_ok = capture is not None
+        self._opened.set()
+        while capture is not None:
+            try:
+                gone = self._read_loop(capture)
+            finally:
+                capture.release()
+            if not gone:
+                return
+            logger.warning("camera %r: no frame for %.2f s, reads failing: opening it again",
+                           self.config.source, REOPEN_AFTER_S)
+            capture = self._reopen()
+
+    def _capture(self, first: bool = False) -> cv2.VideoCapture | None:
+        """The source opened (None where it does not open; logged as an error the first
+        time, when ``start`` reports it)."""
         cfg = self.config
         params = [cv2.CAP_PROP_OPEN_TIMEOUT_MSEC, int(cfg.open_timeout_s * 1000),
                   cv2.CAP_PROP_READ_TIMEOUT_MSEC, int(cfg.timeout_s * 1000)]
         try:
             capture = cv2.VideoCapture(cfg.source, cv2.CAP_ANY, params)
         except cv2.error as exc:
-            logger.error("camera %r: OpenCV cannot open it: %s", cfg.source, exc)
-            self._opened.set()
-            return
-        try:
-            self._open_ok = capture.isOpened()
-            self._opened.set()
-            if self._open_ok:
-                logger.info("camera %r open (%s backend)", cfg.source, capture.getBackendName())
-                self._read_loop(capture)
-        finally:
+            if first:
+                logger.error("camera %r: OpenCV cannot open it: %s", cfg.source, exc)
+            return None
+        if not capture.isOpened():
             capture.release()
+            return None
+        logger.info("camera %r open (%s backend)", cfg.source, capture.getBackendName())
+        return capture
 
-    def _read_loop(self, capture: cv2.VideoCapture) -> None:
+    def _reopen(self) -> cv2.VideoCapture | None:
+        """The live source opened again, trying at growing intervals; None once stopped."""
+        wait_s = REOPEN_FIRST_S
+        while not self._stop.wait(wait_s):
+            capture = self._capture()
+            if capture is not None:
+                with self._changed:
+                    self._reopened += 1
+                return capture
+            wait_s = min(2.0 * wait_s, REOPEN_MAX_S)
+        return None
+
+    def _read_loop(self, capture: cv2.VideoCapture) -> bool:
+        """Read until stopped (False) or, for a live source, until its reads have failed
+        for ``REOPEN_AFTER_S`` since its last frame (True: open it again)."""
+        last_s = time.monotonic()
         while not self._stop.is_set():
             if self._on_demand:
                 self._requested.wait()
                 self._requested.clear()
                 if self._stop.is_set():
-                    return
+                    return False
             ok, image = capture.read()
             arrival_s = time.monotonic()
             if not ok or image is None:
                 with self._changed:
                     self._failed_reads += 1
+                if not self._on_demand and arrival_s - last_s >= REOPEN_AFTER_S:
+                    return True
                 self._stop.wait(_RETRY_AFTER_FAILED_READ_S)
                 continue
+            last_s = arrival_s
             frame = Frame(to_rgb(image, self.width_px, self.height_px), arrival_s)
             with self._changed:
                 self._received += 1
@@ -158,3 +205,4 @@ class FrameReader:
             if missing:
                 logger.warning("camera %r: about %d frame(s) dropped", self.config.source,
                                missing)
+        return False

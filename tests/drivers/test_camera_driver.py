@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import itertools
+import threading
 import time
 
 import cv2
@@ -87,6 +88,18 @@ def test_stalled_stream_times_out_into_fault_until_reset(server):
         server.paused.clear()
         cam.reset()
         assert cam.grab().image.shape == (144, 192, 3)
+
+
+def test_a_stream_that_ends_and_comes_back_is_opened_again_without_a_reset(server):
+    with make_camera(server.stream_url, timeout_s=3.0) as cam:
+        cam.grab()
+        server.set_gone(True)  # the stream ends; a new request gets 503
+        threading.Timer(0.6, server.set_gone, args=(False,)).start()
+        gone_s = time.monotonic()
+        frame = cam.grab()  # late, not a fault
+        assert frame.timestamp_s > gone_s + 0.5
+        assert cam.state is Lifecycle.ACTIVE
+        assert cam.stats.reopened >= 1 and cam.stats.failed_reads >= 1
 
 
 def test_unopenable_source_is_not_connected():
