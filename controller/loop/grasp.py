@@ -192,9 +192,8 @@ def guarded_grasp(arm: Arm, sensor: WrenchSensor, grasp_depth_mm: float,
     Raises:
         ValueError: the weight check has neither ``min_held_weight_n`` nor the part's weight.
     """
-    weigh = config.check in ("weight", "both")
     threshold = config.min_held_weight_n
-    if weigh and threshold is None:
+    if config.check in ("weight", "both") and threshold is None:
         if part_weight_n is None or part_weight_n <= 0.0:
             raise ValueError("controller.grasp.min_held_weight_n: not set and the part's "
                              "weight is unknown: the weight check has no threshold")
@@ -202,70 +201,124 @@ def guarded_grasp(arm: Arm, sensor: WrenchSensor, grasp_depth_mm: float,
     start: Pose = arm.pose(fresh=False)
     if not arm.runs_programs:  # the descent program opens them as the arm starts
         arm.open_gripper()
-        sensor.bias()  # the program path's with its monitor condition, below
-    result = GraspResult(False, "")
-    depth = 0.0
+        sensor.bias()  # the program path's with its monitor condition (_program_descent)
+    attempt = _Attempt(arm, sensor, config, grasp_depth_mm, start, GraspResult(False, ""),
+                       carried, on_carried)
+    ended = (_program_descent(attempt, threshold, lift) if arm.runs_programs
+             else _host_descent(attempt))
+    if ended is not None:
+        return ended
+    return _close_and_lift(attempt, object_width_mm, threshold, lift)
 
-    def retreat(reason: str) -> GraspResult:
+
+@dataclass
+class _Attempt:
+    """One grasp attempt (``guarded_grasp``): the devices, the settings, the pose it started
+    from, the result so far and the loop's step the first descent move makes."""
+
+    arm: Arm
+    sensor: WrenchSensor
+    config: GraspConfig
+    grasp_depth_mm: float
+    start: Pose
+    result: GraspResult
+    carried: ToolStep | None
+    on_carried: Callable[[], None] | None
+
+    def retreat(self, reason: str) -> GraspResult:
+        """Halt, open the jaws and go back to the start pose; the result says why."""
         logger.warning("grasp aborted: %s; retreating", reason)
-        arm.halt()
-        arm.open_gripper()
-        arm.move_to(start)
-        result.reason, result.retreated = reason, True
-        return result
+        self.arm.halt()
+        self.arm.open_gripper()
+        self.arm.move_to(self.start)
+        self.result.reason, self.result.retreated = reason, True
+        return self.result
 
-    if arm.runs_programs:
-        # the controller stops the descent itself on the sensor's output: one command
-        fast = min(max(0.0, config.free_descent_mm - config.guard_clearance_mm), grasp_depth_mm)
-        lateral = carried if carried is not None else ToolStep()
-        via = start.moved_in_tool_frame(dataclasses.replace(lateral, dz_mm=fast))
-        target = start.moved_in_tool_frame(dataclasses.replace(lateral, dz_mm=grasp_depth_mm))
-        # the close and the lift in the same run where nothing need be read between them:
-        # the weight check's reference is then read here (open jaws, no contact, the same
-        # approach axis), and the sensor's condition watches the close for a jam
-        grip = lift and config.check == "weight" and config.lift_mm > 0
-        # the bias, the condition and the reference on the sensor's line while the arm's
-        # line carries the descent's locations; the run starts once they are done
-        setup = sensor.prepare_contact_guard(contact_condition(config),
-                                             config.weight_samples if grip else None)
-        try:
-            descent = arm.guarded_descent(
-                via, target, config.guard_speed_percent,
-                config.free_descent_mm + config.guard_zone_mm - fast,
-                config.lift_mm if grip else None, ready=setup.wait)
-        except MotionRejectedError as exc:
-            result.reason = f"descent refused: {exc}"
-            logger.warning("grasp: %s", result.reason)
-            return result
-        finally:
-            setup.join()
-        reference = _force(setup.wait()) if grip else None
-        if carried is not None:
-            result.carried_step = dataclasses.replace(carried, dz_mm=0.0)
-            if on_carried is not None:
-                on_carried()
-        if descent.closed and reference is not None:
-            return _gripped_in_the_run(arm, sensor, descent, result, reference,
-                                       grasp_depth_mm, config, threshold, retreat)
-        depth = start.tool_step_to(descent.pose).dz_mm
-        result.depth_mm = depth
-        wrench = sensor.read()
+    def carried_made(self) -> None:
+        """Record that the first descent move made the loop's step, and tell the caller."""
+        self.result.carried_step = dataclasses.replace(self.carried, dz_mm=0.0)
+        if self.on_carried is not None:
+            self.on_carried()
+
+    def tripped(self, depth: float, contact: bool = False) -> Guard | None:
+        """Read the sensor at ``depth`` (mm) into the result and return the first guard it
+        trips (the early-contact guard is off in the contact zone). ``contact``: the
+        controller's monitor stopped the descent; where no guard tripped on the reading, the
+        zone's guard (``stop`` in the contact zone, early contact above it) stands for it."""
+        config, result = self.config, self.result
+        wrench = self.sensor.read()
         result.forces_n.append(wrench.force_n)
-        result.max_force_n = wrench.force_n
-        in_contact_zone = depth >= grasp_depth_mm - config.contact_margin_mm
+        result.max_force_n = max(result.max_force_n, wrench.force_n)
+        in_contact_zone = depth >= self.grasp_depth_mm - config.contact_margin_mm
         active = [g for g in config.guards if not (in_contact_zone and g.name == "early contact")]
         guard = first_tripped(wrench, active)
-        if descent.contact and guard is None:
+        if contact and guard is None:
             guard = next((g for g in active if g.action == "stop"), None) if in_contact_zone \
                 else next((g for g in active if g.name == "early contact"), None)
-        if guard is not None:
-            reason = (f"{guard.name or 'guard'}: {guard.quantity} {guard.op} {guard.limit:g} "
-                      f"at depth {depth:.1f} mm")
-            if guard.action == "retreat":
-                return retreat(reason)
-            result.reason = reason
-        depth = grasp_depth_mm  # the loop below has nothing left to do
+        return guard
 
+
+def _guard_reason(guard: Guard, depth: float) -> str:
+    """What a tripped guard ended the descent with."""
+    return (f"{guard.name or 'guard'}: {guard.quantity} {guard.op} {guard.limit:g} "
+            f"at depth {depth:.1f} mm")
+
+
+def _program_descent(attempt: _Attempt, threshold: float | None,
+                     lift: bool) -> GraspResult | None:
+    """The descent as one controller program stopped by the sensor's monitor output (with the
+    weight check and a lift, the close and the lift in the same run). Returns the finished
+    result, or None where the host goes on to close the jaws."""
+    arm, sensor, config, result = attempt.arm, attempt.sensor, attempt.config, attempt.result
+    grasp_depth_mm, start, carried = attempt.grasp_depth_mm, attempt.start, attempt.carried
+    # the controller stops the descent itself on the sensor's output: one command
+    fast = min(max(0.0, config.free_descent_mm - config.guard_clearance_mm), grasp_depth_mm)
+    lateral = carried if carried is not None else ToolStep()
+    via = start.moved_in_tool_frame(dataclasses.replace(lateral, dz_mm=fast))
+    target = start.moved_in_tool_frame(dataclasses.replace(lateral, dz_mm=grasp_depth_mm))
+    # the close and the lift in the same run where nothing need be read between them:
+    # the weight check's reference is then read here (open jaws, no contact, the same
+    # approach axis), and the sensor's condition watches the close for a jam
+    grip = lift and config.check == "weight" and config.lift_mm > 0
+    # the bias, the condition and the reference on the sensor's line while the arm's line
+    # carries the descent's locations; the run starts once they are done
+    setup = sensor.prepare_contact_guard(contact_condition(config),
+                                         config.weight_samples if grip else None)
+    try:
+        descent = arm.guarded_descent(
+            via, target, config.guard_speed_percent,
+            config.free_descent_mm + config.guard_zone_mm - fast,
+            config.lift_mm if grip else None, ready=setup.wait)
+    except MotionRejectedError as exc:
+        result.reason = f"descent refused: {exc}"
+        logger.warning("grasp: %s", result.reason)
+        return result
+    finally:
+        setup.join()
+    reference = _force(setup.wait()) if grip else None
+    if carried is not None:
+        attempt.carried_made()
+    if descent.closed and reference is not None:
+        return _gripped_in_the_run(arm, sensor, descent, result, reference,
+                                   grasp_depth_mm, config, threshold, attempt.retreat)
+    depth = start.tool_step_to(descent.pose).dz_mm
+    result.depth_mm = depth
+    guard = attempt.tripped(depth, contact=descent.contact)
+    if guard is not None:
+        if guard.action == "retreat":
+            return attempt.retreat(_guard_reason(guard, depth))
+        result.reason = _guard_reason(guard, depth)
+    return None
+
+
+def _host_descent(attempt: _Attempt) -> GraspResult | None:
+    """The descent in moves from the host, the sensor read after each: free space in one
+    move, guarded steps through the zone where a finger can meet the part, the rest in one.
+    Returns the finished result (a guard made it retreat), or None where the host goes on to
+    close the jaws."""
+    arm, config, result = attempt.arm, attempt.config, attempt.result
+    grasp_depth_mm, carried = attempt.grasp_depth_mm, attempt.carried
+    depth = 0.0
     zone_end = config.free_descent_mm + config.guard_zone_mm
     while depth < grasp_depth_mm - 1e-9:
         if depth == 0.0:
@@ -279,28 +332,26 @@ def guarded_grasp(arm: Arm, sensor: WrenchSensor, grasp_depth_mm: float,
             # a tool step translates in the tool frame, then turns about its approach axis:
             # the descent and the loop's step in one command end where the two would
             arm.move_tool(dataclasses.replace(carried, dz_mm=step))
-            result.carried_step = dataclasses.replace(carried, dz_mm=0.0)
-            if on_carried is not None:
-                on_carried()
+            attempt.carried_made()
         else:
             arm.move_tool(ToolStep(dz_mm=step))
         depth += step
         result.depth_mm = depth
-        wrench = sensor.read()
-        result.forces_n.append(wrench.force_n)
-        result.max_force_n = max(result.max_force_n, wrench.force_n)
-        in_contact_zone = depth >= grasp_depth_mm - config.contact_margin_mm
-        active = [g for g in config.guards if not (in_contact_zone and g.name == "early contact")]
-        guard = first_tripped(wrench, active)
+        guard = attempt.tripped(depth)
         if guard is not None:
-            reason = (f"{guard.name or 'guard'}: {guard.quantity} {guard.op} {guard.limit:g} "
-                      f"at depth {depth:.1f} mm")
             if guard.action == "retreat":
-                return retreat(reason)
+                return attempt.retreat(_guard_reason(guard, depth))
             arm.halt()
-            result.reason = reason
+            result.reason = _guard_reason(guard, depth)
             break
+    return None
 
+
+def _close_and_lift(attempt: _Attempt, object_width_mm: float, threshold: float | None,
+                    lift: bool) -> GraspResult:
+    """Close the jaws at the bottom of the descent, check for a jam and the width, then lift
+    and weigh the part (``GraspConfig.check``)."""
+    arm, sensor, config, result = attempt.arm, attempt.sensor, attempt.config, attempt.result
     samples = config.weight_samples
     open_jaws = mean_force(sensor, samples)
     width = arm.close_gripper()
@@ -308,12 +359,13 @@ def guarded_grasp(arm: Arm, sensor: WrenchSensor, grasp_depth_mm: float,
     closing = mean_force(sensor, config.closing_samples) - open_jaws
     result.closing_force_n = float(np.linalg.norm(closing))
     if result.closing_force_n > config.max_closing_force_n:
-        return retreat(f"grip check failed: the force changed by {result.closing_force_n:.1f} N "
-                       f"while the jaws closed (a finger jammed on the part)")
+        return attempt.retreat(f"grip check failed: the force changed by "
+                               f"{result.closing_force_n:.1f} N while the jaws closed (a "
+                               f"finger jammed on the part)")
     check_width = config.check in ("width", "both")
     if check_width and abs(width - object_width_mm) > config.width_tolerance_mm:
-        return retreat(f"grip check failed: finger width {width:.1f} mm, expected "
-                       f"{object_width_mm:.1f} +/- {config.width_tolerance_mm:g} mm")
+        return attempt.retreat(f"grip check failed: finger width {width:.1f} mm, expected "
+                               f"{object_width_mm:.1f} +/- {config.width_tolerance_mm:g} mm")
     if not lift:
         result.success, result.reason = True, "closed on the part"
         return result
@@ -323,14 +375,15 @@ def guarded_grasp(arm: Arm, sensor: WrenchSensor, grasp_depth_mm: float,
             width = arm.finger_width_mm()
             if abs(width - object_width_mm) > config.width_tolerance_mm:
                 result.width_mm = width
-                return retreat(f"part slipped while lifting: finger width {width:.1f} mm")
+                return attempt.retreat(f"part slipped while lifting: finger width "
+                                       f"{width:.1f} mm")
         # Against the open jaws at the bottom (same orientation, no contact): what the sensor
         # feels more along the approach axis now is the part hanging in the jaws.
         result.held_weight_n = float(mean_force(sensor, samples)[2] - open_jaws[2])
-        if weigh and result.held_weight_n < threshold:
-            return retreat(f"grip check failed: {result.held_weight_n:.3f} N on the wrist "
-                           f"after lifting (mean of {samples}), expected at least "
-                           f"{threshold:.3f} N")
+        if config.check in ("weight", "both") and result.held_weight_n < threshold:
+            return attempt.retreat(f"grip check failed: {result.held_weight_n:.3f} N on the "
+                                   f"wrist after lifting (mean of {samples}), expected at "
+                                   f"least {threshold:.3f} N")
     result.success = True
     result.reason = result.reason or "held after lift"
     return result
