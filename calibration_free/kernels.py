@@ -212,6 +212,100 @@ def _colour_sums(lin: np.ndarray, core: np.ndarray, ring: np.ndarray, i0: int, i
     return n_core, n_ring
 
 
+@njit("float64[:, :, ::1](uint8[:, :, :], float64[::1])", cache=True, nogil=True,
+      error_model="numpy", inline="always")
+def _linear_image(rgb: np.ndarray, linear: np.ndarray) -> np.ndarray:  # pragma: no cover
+    """Each pixel's colour in linear light (``linear`` maps grey levels to it), H x W x 3."""
+    height, width = rgb.shape[0], rgb.shape[1]
+    lin = np.empty((height, width, 3))
+    for i in range(height):
+        for j in range(width):
+            for k in range(3):
+                lin[i, j, k] = linear[rgb[i, j, k]]
+    return lin
+
+
+@njit("boolean(float64[:, :, ::1], uint8[:, :], uint8[:, :], float64, float64[::1], "
+      "float64[::1])", cache=True, nogil=True, error_model="numpy", inline="always")
+def _window_colours(lin: np.ndarray, core: np.ndarray, ring: np.ndarray, min_contrast: float,
+                    fg0: np.ndarray, bg0: np.ndarray) -> bool:  # pragma: no cover
+    """Into ``fg0`` (zeros) the mean colour of the window's ``core`` pixels, into ``bg0``
+    (zeros) that of its ``ring`` pixels. False where the coverage cannot be read: no pixel of
+    either, a black part, or a background with less than ``min_contrast`` across the part's
+    colour direction."""
+    height, width = core.shape
+    n_in, n_out = _colour_sums(lin, core, ring, 0, height, 0, width, fg0, bg0)
+    if n_in == 0 or n_out == 0:
+        return False
+    fg0 /= n_in
+    bg0 /= n_out
+    norm0 = np.sqrt(fg0[0] * fg0[0] + fg0[1] * fg0[1] + fg0[2] * fg0[2])
+    if norm0 <= 0.0:
+        return False
+    cb0 = bb0 = 0.0
+    for k in range(3):
+        cb0 += fg0[k] / norm0 * bg0[k]
+        bb0 += bg0[k] * bg0[k]
+    return bb0 - cb0 * cb0 >= min_contrast * min_contrast
+
+
+@njit("float64(float64[:, :, ::1], uint8[:, :], uint8[:, :], int64, int64, float64[::1], "
+      "float64[::1], float64[::1], float64[::1])", cache=True, nogil=True, error_model="numpy",
+      inline="always")
+def _square_colours(lin: np.ndarray, core: np.ndarray, ring: np.ndarray, i: int, j: int,
+                    fg0: np.ndarray, bg0: np.ndarray, fg: np.ndarray,
+                    bg: np.ndarray) -> float:  # pragma: no cover
+    """Into ``fg`` the mean colour of the ``core`` pixels in the 5x5 square around pixel
+    (i, j), into ``bg`` that of its ``ring`` pixels (the window's, ``fg0`` and ``bg0``,
+    where the square has none); returns the length of ``fg``."""
+    height, width = core.shape
+    fg[:] = 0.0
+    bg[:] = 0.0
+    nf, nb = _colour_sums(lin, core, ring, max(i - 2, 0), min(i + 3, height),
+                          max(j - 2, 0), min(j + 3, width), fg, bg)
+    if nf:
+        fg /= nf
+    else:
+        fg[:] = fg0
+    if nb:
+        bg /= nb
+    else:
+        bg[:] = bg0
+    return np.sqrt(fg[0] * fg[0] + fg[1] * fg[1] + fg[2] * fg[2])
+
+
+@njit("float64(float64[::1], uint8, float64[::1], float64[::1], float64, float64)",
+      cache=True, nogil=True, error_model="numpy", inline="always")
+def _coverage_share(p: np.ndarray, on_blob: bool, fg: np.ndarray, bg: np.ndarray, norm: float,
+                    local_contrast: float) -> float:  # pragma: no cover
+    """The part's coverage of a band pixel of linear colour ``p``, from the part's colour
+    ``fg`` (of length ``norm``, > 0) and the background's ``bg`` around it, as
+    ``colour_coverage_moments`` describes it; ``on_blob``: the pixel is on the blob."""
+    cb = pc = pb = bb = 0.0
+    for k in range(3):
+        c = fg[k] / norm
+        cb += c * bg[k]
+        pc += p[k] * c
+        pb += p[k] * bg[k]
+        bb += bg[k] * bg[k]
+    across = bb - cb * cb
+    if not across >= local_contrast * local_contrast:
+        # the table around is too dark for its colour to be told from the part's (the
+        # part's own cast shadow): what light the pixel has is the part's, so its share is
+        # the part's own
+        w = pc / norm
+    else:
+        beta = (pb - cb * pc) / across
+        w = 1.0 - beta
+        if not on_blob:
+            # mostly table: a shadow's edge along the part's darkens the table here below
+            # what the ring shows, which the table's share alone reads as part
+            w = 0.5 * (w + (pc - beta * cb) / norm)
+    # far beyond 0..1 is no mix of the two colours (a glint, a speck): bounded so that one
+    # such pixel cannot move the centre; within, the noise stays unbiased
+    return min(max(w, -1.0), 2.0)
+
+
 @njit("UniTuple(float64, 3)(uint8[:, :, :], uint8[:, :], uint8[:, :], uint8[:, :], "
       "uint8[:, :], float64[::1], float64, float64, float32[:, ::1])", cache=True, nogil=True,
       error_model="numpy")
@@ -236,26 +330,10 @@ def colour_coverage_moments(rgb: np.ndarray, blob: np.ndarray, core: np.ndarray,
     window's size) receives each pixel's weight (0 off the band; undefined where all zero is
     returned)."""
     height, width = core.shape
-    lin = np.empty((height, width, 3))
-    for i in range(height):
-        for j in range(width):
-            for k in range(3):
-                lin[i, j, k] = linear[rgb[i, j, k]]
+    lin = _linear_image(rgb, linear)
     fg0 = np.zeros(3)
     bg0 = np.zeros(3)
-    n_in, n_out = _colour_sums(lin, core, ring, 0, height, 0, width, fg0, bg0)
-    if n_in == 0 or n_out == 0:
-        return 0.0, 0.0, 0.0
-    fg0 /= n_in
-    bg0 /= n_out
-    norm0 = np.sqrt(fg0[0] * fg0[0] + fg0[1] * fg0[1] + fg0[2] * fg0[2])
-    if norm0 <= 0.0:
-        return 0.0, 0.0, 0.0
-    cb0 = bb0 = 0.0
-    for k in range(3):
-        cb0 += fg0[k] / norm0 * bg0[k]
-        bb0 += bg0[k] * bg0[k]
-    if not bb0 - cb0 * cb0 >= min_contrast * min_contrast:
+    if not _window_colours(lin, core, ring, min_contrast, fg0, bg0):
         return 0.0, 0.0, 0.0
     fg = np.empty(3)
     bg = np.empty(3)
@@ -265,46 +343,10 @@ def colour_coverage_moments(rgb: np.ndarray, blob: np.ndarray, core: np.ndarray,
             if core[i, j]:
                 w = 1.0
             elif band[i, j]:
-                fg[:] = 0.0
-                bg[:] = 0.0
-                nf, nb = _colour_sums(lin, core, ring, max(i - 2, 0), min(i + 3, height),
-                                      max(j - 2, 0), min(j + 3, width), fg, bg)
-                if nf:
-                    fg /= nf
-                else:
-                    fg[:] = fg0
-                if nb:
-                    bg /= nb
-                else:
-                    bg[:] = bg0
-                norm = np.sqrt(fg[0] * fg[0] + fg[1] * fg[1] + fg[2] * fg[2])
+                norm = _square_colours(lin, core, ring, i, j, fg0, bg0, fg, bg)
                 if norm <= 0.0:
                     return 0.0, 0.0, 0.0
-                cb = pc = pb = bb = 0.0
-                for k in range(3):
-                    c = fg[k] / norm
-                    p = lin[i, j, k]
-                    cb += c * bg[k]
-                    pc += p * c
-                    pb += p * bg[k]
-                    bb += bg[k] * bg[k]
-                across = bb - cb * cb
-                if not across >= local_contrast * local_contrast:
-                    # the table around is too dark for its colour to be told from the
-                    # part's (the part's own cast shadow): what light the pixel has is the
-                    # part's, so its share is the part's own
-                    w = pc / norm
-                else:
-                    beta = (pb - cb * pc) / across
-                    w = 1.0 - beta
-                    if not blob[i, j]:
-                        # mostly table: a shadow's edge along the part's darkens the table
-                        # here below what the ring shows, which the table's share alone
-                        # reads as part
-                        w = 0.5 * (w + (pc - beta * cb) / norm)
-                # far beyond 0..1 is no mix of the two colours (a glint, a speck): bounded so
-                # that one such pixel cannot move the centre; within, the noise stays unbiased
-                w = min(max(w, -1.0), 2.0)
+                w = _coverage_share(lin[i, j], blob[i, j], fg, bg, norm, local_contrast)
             else:
                 weights[i, j] = 0.0
                 continue
