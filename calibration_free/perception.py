@@ -1,34 +1,34 @@
 """Perception of one hand-camera frame with a trained model bundle (the paper's Fig. 3).
 
-The bundle's front end (max channel -> normalisation, or saturation -> localisation) -> NN1
-(centre -> dx, dy): the half-loop path, ``Perception.translation``. ``Perception.rotation``
-goes on from that percept: 50x50 ROI -> 36 Gabor features -> NN2 (features -> sin/cos of kappa
-dphi) -> dphi (for an elongated part read from its long axis where the bundle has an axis map,
-``calibration_free.axis``), and the full loop's translation. ``perceive`` is both in one pass.
+The frame goes through named stages (``calibration_free.stages``): the localiser (the
+bundle's front end), the occlusion fallbacks where the model runs them (``ends``: a bar with
+one end hidden; ``outline``: a part partly hidden), and the translation nets' NN1 (centre ->
+dx, dy): the half-loop path, ``Perception.translation``. ``Perception.rotation`` goes on from
+that percept: 50x50 ROI -> 36 Gabor features -> NN2 (features -> sin/cos of kappa dphi) ->
+dphi (for an elongated part read from its long axis where the model runs the ``axis``
+stage), and the full loop's translation (``nn1_rot``, ``nn1_near``). ``perceive`` is both in
+one pass.
 """
 
 from __future__ import annotations
 
-import dataclasses
-import math
 import time
+from collections.abc import Sequence
 from dataclasses import dataclass, field
 
 import numpy as np
 
 from calibration_free import angles
 from calibration_free.bundle import ModelBundle
-from calibration_free.ends import hidden_end_shift
 from calibration_free.gabor import GaborBank
 from calibration_free.localise import Localisation
-from calibration_free.outline import OutlineFit, completed, fit_outline
-
-# A part seen this share smaller than at the taught pose is centred on the outline it shows
-# where something lies against it (``calibration_free.outline``). Well below the loop's
-# hidden-part check (``controller.loop.hidden_check_share``): a bar's centre moves by
-# millimetres for a few per cent hidden, and a gate the hidden share straddles from one pose
-# to the next made the loop step back and forth between the two.
-OUTLINE_BELOW = 0.03
+from calibration_free.outline import OutlineFit
+from calibration_free.stages import (
+    Localiser,
+    Nn2Turn,
+    OptionalStages,
+    TranslationNets,
+)
 
 
 @dataclass(frozen=True)
@@ -103,20 +103,35 @@ class Percept:
 
 
 class Perception:
-    """Runs a trained bundle on hand-camera frames (HxWx3 uint8 RGB).
+    """Runs a trained bundle on hand-camera frames (HxWx3 uint8 RGB), stage by stage
+    (``calibration_free.stages``).
 
     Args:
         bundle: the trained model; its ``front`` preprocesses and localises, its networks
             map the result to the corrective step.
+        stages: the optional stages to run (``stages.OPTIONAL_STAGES``); None: the ones the
+            bundle was trained with (``training["stages"]``), and where it names none every
+            one whose trained data it has.
+
+    Attributes:
+        localiser, translation, nn2: the stages every model runs.
+        optional: the optional stages (``ends``, ``outline``, ``axis``), each None where
+            skipped.
+
+    Raises:
+        BundleError: a stage named without its trained data (one line naming it).
     """
 
-    def __init__(self, bundle: ModelBundle):
+    def __init__(self, bundle: ModelBundle, stages: Sequence[str] | None = None):
         self.bundle = bundle
-        self._front = bundle.front
-        self._bank = GaborBank(bundle.gabor)
-        self._roi_px = bundle.gabor.roi_px
-        # a bar (both ends alike): where one end is hidden, the other says where its centre is
-        self._ends = bundle.axis.ends if bundle.axis is not None else None
+        if stages is None:
+            stages = bundle.training.get("stages")
+        self.localiser = Localiser(bundle.front)
+        self.optional = OptionalStages.of(stages, bundle.axis, bundle.front,
+                                          bundle.gabor.roi_px)
+        self.nn2 = Nn2Turn(bundle.front, GaborBank(bundle.gabor), bundle.nn2, bundle.kappa)
+        self.translation_nets = TranslationNets(bundle.nn1, bundle.nn1_rot, bundle.nn1_near,
+                                                bundle.near_mm)
 
     def locate(self, image: np.ndarray) -> tuple[np.ndarray, Localisation]:
         """The preprocessed image (``FrontEnd.preprocess``) and the object's localisation in it.
@@ -127,7 +142,7 @@ class Perception:
         Raises:
             ImageError: the frame is not HxWx3 uint8 of the size the bundle was trained on.
         """
-        return self._front.locate(image)
+        return self.bundle.front.locate(image)
 
     def translation(self, image: np.ndarray) -> Percept:
         """NN1 only: the corrective translation (the half-loop fast path). The percept keeps
@@ -138,42 +153,40 @@ class Perception:
         """
         clock = time.perf_counter_ns
         t0 = clock()
-        normalised = self._front.preprocess(image)
+        normalised = self.localiser.preprocess(image)
         t1 = clock()
-        loc = self._front.localise(normalised, image)
+        loc = self.localiser.localise(normalised, image)
         t2 = clock()
         timings = {"preprocess": (t1 - t0) / 1e3, "localise": (t2 - t1) / 1e3}
         if loc.status != "ok":
             timings["total"] = (t2 - t0) / 1e3
-            return Percept(loc, None, None, None, None, timings)
+            return Percept(localisation=loc, nn1_mm=None, features=None, nn2_sc=None,
+                           dphi_deg=None, timings_us=timings)
         hidden_px, centre = None, (loc.u_px, loc.v_px)
-        if self._ends is not None:
-            shift = hidden_end_shift(normalised, loc.part_mask, loc.u_px, loc.v_px,
-                                     self._ends, self._front.threshold)
-            if shift is not None:
-                du, dv, hidden_px = shift
-                centre = (loc.u_px + du, loc.v_px + dv)
+        ends, outline = self.optional.ends, self.optional.outline
+        if ends is not None:
+            read = ends.centre(normalised, loc)
+            if read is not None:
+                centre, hidden_px = read
             t_ends = clock()
             timings["ends"] = (t_ends - t2) / 1e3
             t2 = t_ends
         hidden_share, fit = None, None
-        share = self._front.seen_share(loc.area_px)
-        if hidden_px is None and share is not None and share < 1.0 - OUTLINE_BELOW \
-                and self._front.outlines:
-            fit = fit_outline(normalised, loc.part_mask, loc.u_px, loc.v_px,
-                              self._front.outlines, self._front.threshold)
+        share = self.bundle.front.seen_share(loc.area_px)
+        if hidden_px is None and outline is not None and outline.wanted(share):
+            fit = outline.fit(normalised, loc)
             if fit is not None:
                 centre, hidden_share = (fit.u_px, fit.v_px), 1.0 - share
             t_outline = clock()
             timings["outline"] = (t_outline - t2) / 1e3
             t2 = t_outline
-        dx, dy = self.bundle.nn1(np.array(centre))
+        nn1_mm = self.translation_nets.half(centre)
         t3 = clock()
         timings.update(nn1=(t3 - t2) / 1e3, total=(t3 - t0) / 1e3)
-        return Percept(loc, (float(dx), float(dy)), None, None, None, timings,
-                       normalised=normalised, hidden_px=hidden_px, centre_px=centre,
-                       hidden_share=hidden_share, outline_fit=fit,
-                       seen_share=None if hidden_px is not None else share)
+        return Percept(localisation=loc, nn1_mm=nn1_mm, features=None, nn2_sc=None,
+                       dphi_deg=None, timings_us=timings, normalised=normalised,
+                       hidden_px=hidden_px, centre_px=centre, hidden_share=hidden_share,
+                       outline_fit=fit, seen_share=None if hidden_px is not None else share)
 
     def rotation(self, percept: Percept) -> Percept:
         """Go on from a ``translation`` percept of the same frame: ROI -> Gabor features ->
@@ -192,48 +205,31 @@ class Perception:
         loc = percept.localisation
         frame, seen = percept.normalised, loc
         fit = percept.outline_fit
-        if fit is not None and self._front.feature_ceiling:
+        if fit is not None and self.optional.outline is not None:
             # the features see the part with its hidden part drawn in, centred on it
-            frame, mask = completed(frame, loc.part_mask, fit,
-                                    self._front.feature_ceiling * self._front.threshold)
-            seen = dataclasses.replace(loc, u_px=fit.u_px, v_px=fit.v_px, part_mask=mask,
-                                       coverage=None)
-        roi = self._front.feature_roi(frame, seen, self._roi_px)
+            frame, seen = self.optional.outline.completed(frame, loc, fit)
+        roi = self.nn2.roi(frame, seen)
         t4 = clock()
-        features = self._bank.features(roi)
+        features = self.nn2.features(roi)
         t5 = clock()
-        s, c = self.bundle.nn2(features)
-        dphi = nn2_deg = angles.decode(float(s), float(c), self.bundle.kappa)
-        norm = max(float(np.hypot(s, c)), 1e-9)
-        sc = (float(s) / norm, float(c) / norm)
-        axis_deg = None
-        if self.bundle.axis is not None:
-            silhouette = roi
-            if self.bundle.axis.silhouette == "coverage":
-                # where the coverage is not read (a part partly hidden, drawn in) the
-                # features' silhouette stands in: the same outline, less exactly placed
-                coverage = self._front.coverage_roi(seen, self._roi_px)
-                silhouette = roi if coverage is None else coverage
-            axis_deg = self.bundle.axis.reading(silhouette, *percept.centre_px, nn2_deg)
+        nn2_sc, nn2_deg, sc = self.nn2.turn(features)
+        dphi, axis_deg = nn2_deg, None
+        if self.optional.axis is not None:
+            axis_deg = self.optional.axis.reading(roi, seen, percept.centre_px, nn2_deg)
             if axis_deg is not None:
                 dphi = axis_deg
                 sc = tuple(float(v) for v in angles.encode(dphi, self.bundle.kappa))
-        inputs = np.array((*percept.centre_px, *sc))
-        dx_rot, dy_rot = self.bundle.nn1_rot(inputs)
-        rot_mm = (float(dx_rot), float(dy_rot))
-        near = math.hypot(*rot_mm) <= self.bundle.near_mm
-        full_mm = rot_mm
-        if near:
-            cx, cy = self.bundle.nn1_near(inputs)
-            full_mm = (rot_mm[0] + float(cx), rot_mm[1] + float(cy))
+        rot_mm, near, full_mm = self.translation_nets.full(percept.centre_px, sc)
         t6 = clock()
         timings = dict(percept.timings_us)
         timings.update(roi=(t4 - t3) / 1e3, features=(t5 - t4) / 1e3, nn2=(t6 - t5) / 1e3,
                        total=timings["total"] + (t6 - t3) / 1e3)
-        return Percept(loc, percept.nn1_mm, features, (float(s), float(c)), dphi, timings,
-                       full_mm, percept.normalised, rot_mm, near, nn2_deg, axis_deg,
-                       percept.hidden_px, percept.centre_px, percept.hidden_share,
-                       fit, percept.seen_share)
+        return Percept(localisation=loc, nn1_mm=percept.nn1_mm, features=features,
+                       nn2_sc=nn2_sc, dphi_deg=dphi, timings_us=timings, full_mm=full_mm,
+                       normalised=percept.normalised, rot_mm=rot_mm, near=near,
+                       nn2_deg=nn2_deg, axis_deg=axis_deg, hidden_px=percept.hidden_px,
+                       centre_px=percept.centre_px, hidden_share=percept.hidden_share,
+                       outline_fit=fit, seen_share=percept.seen_share)
 
     def perceive(self, image: np.ndarray) -> Percept:
         """The whole path in one pass: corrective translation (NN1) and rotation (NN2).
