@@ -27,6 +27,7 @@ from calibration_free.gabor import GaborConfig
 from calibration_free.heading_zero import HeadingZero
 from calibration_free.mlp import NumpyMLP
 from calibration_free.model_file import TaughtModel
+from calibration_free.stages import check_stages
 from drivers.core.pose import Pose
 from drivers.core.typed_config import from_mapping, to_mapping
 
@@ -66,7 +67,10 @@ class ModelBundle(TaughtModel):
             the translation (``calibration_free.heading_zero``, made by a re-zero with a
             heading step; the positioning loop takes it off each full look's step); None:
             one zero for every heading.
-        training: JSON-able training metadata (loss curves, seconds, sample counts, seed).
+        training: JSON-able training metadata (loss curves, seconds, sample counts, seed),
+            and ``stages``, where the recipe named them: the optional perception stages the
+            bundle runs (``calibration_free.stages``; absent: every one whose data it has);
+            one it has no data for is refused at load.
         format_version: file format version this bundle follows.
     """
 
@@ -117,6 +121,11 @@ class ModelBundle(TaughtModel):
         if self.axis is not None and (not isinstance(self.axis, AxisMap)
                                       or self.axis.kappa != self.kappa):
             raise BundleError(f"axis: must be an axis map of the part's kappa {self.kappa}")
+        stages = self.training.get("stages")
+        if stages is not None and not (isinstance(stages, (list, tuple))
+                                       and all(isinstance(s, str) for s in stages)):
+            raise BundleError(f"training.stages: must be a list of stage names, got {stages!r}")
+        check_stages(stages, self.axis, self.front)
         if self.heading_zero is not None and not isinstance(self.heading_zero, HeadingZero):
             raise BundleError("heading_zero: must be a HeadingZero or None")
         if self.nn2.n_inputs != self.gabor.n_filters or self.nn2.n_outputs != 2:

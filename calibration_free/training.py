@@ -22,11 +22,11 @@ import cv2
 import numpy as np
 
 from calibration_free import angles
-from calibration_free.axis import fit_axis
+from calibration_free.axis import AxisMap, fit_axis
 from calibration_free.bundle import ModelBundle
 from calibration_free.dataset import Dataset
-from calibration_free.ends import fit_ends
-from calibration_free.errors import TrainingError
+from calibration_free.ends import EndMap, fit_ends
+from calibration_free.errors import BundleError, TrainingError
 from calibration_free.front_end import FEATURE_CEILING, FEATURE_FLOOR, FrontEnd, learn_chroma
 from calibration_free.gabor import GaborBank, GaborConfig
 from calibration_free.localise import (
@@ -49,52 +49,42 @@ from calibration_free.preprocess import (
     max_and_saturation_u8,
     normalise,
 )
+from calibration_free.stages import StageName, check_stages
 from drivers.core.pose import Pose
 
 logger = logging.getLogger(__name__)
 
 NN1_HIDDEN = (3,)
 # The rotation-aware translation net, on (u, v, sin, cos of kappa dphi): the silhouette's
-# centre circles the grasp point as the part turns, which three tanh units cannot follow.
-# RMS x / y on 200 random test poses within 4 mm (simulated cell, good light), 3 -> 16 units:
-# screw 1.9 / 0.8 -> 0.16 / 0.15 mm, cube 0.15 / 0.15 -> 0.06 / 0.06 mm. In the loop (cube,
-# 40 trials, RMS x / y after 1.5 loops) 6 units 0.06 / 0.13 mm, 16 units 0.12 / 0.05 mm (it
-# fits the taught spot too closely), 10 units 0.06 / 0.08 mm.
+# centre circles the grasp point as the part turns, which three tanh units cannot follow; more
+# units fit the taught spot too closely (the figures: docs/decisions/0025-perception-stages.md).
 NN1_ROT_HIDDEN = (10,)
 NN2_HIDDEN = (12,)
-# Rprop steps. NN2 stops early: on 63 images more steps start to overfit (on synthetic
-# cubes 400 steps gave ~1.0 deg RMS on random test poses, 1500 steps ~1.2 deg).
+# Rprop steps. NN2 stops early: on the NN2 grid's 63 images more steps overfit.
 NN1_EPOCHS = 2000
 NN2_EPOCHS = 1500
 # The near translation net needs at least this many samples in its range.
 MIN_NEAR_SAMPLES = 9
 # The near net's L2 penalty: it corrects nn1_rot where the samples say so and fades to no
-# correction between them (without it, 10 units on 70 samples wiggle between the grid's
-# three positions per axis).
+# correction between them, instead of wiggling between the grid's three positions per axis.
 NN1_NEAR_WEIGHT_DECAY = 1e-2
 # A part without symmetry: its silhouette's centre circles the grasp point over the whole
-# circle, and the near samples span every turn (screw, NN2 set's images turned 30-60 deg: RMS
-# x 0.23 -> 0.16 mm with 1e-3; in the loop, good light, 200 trials, seed 3, RMS x / y after
-# 2.5 loops 0.12 / 0.07 -> 0.08 / 0.03 mm; 1e-4 fitted as 1e-3).
+# circle, and the near samples span every turn, which the looser fit follows.
 NN1_NEAR_WEIGHT_DECAY_NO_SYMMETRY = 1e-3
 # Training images whose label is this close to zero were taken at the taught pose.
 NOMINAL_TOL_MM = 0.05
 NOMINAL_TOL_DEG = 0.05
 # L2 penalty on NN2's weights: 63 images cannot pin down 36 x 12 weights; without it NN2
-# reads ~0 for any rotation within a few degrees of a grid angle (see mlp.train_mlp). With the
-# staggered grid, 1e-2 keeps NN2 from amplifying camera noise (RMS phi after 2.5 loops, 40
-# trials, 1e-3 -> 1e-2: nut 1.42 / 1.07 -> 0.72 / 0.66 deg, seeds 3 / 4; ledge 0.19 -> 0.12;
-# cube 0.29 / 0.33 -> 0.25 / 0.33; 3e-2 was worse: nut 0.93). A part without symmetry
-# (kappa 1) maps the whole circle and needs the looser fit: screw 1.01 -> 1.51 deg with 1e-2.
+# reads ~0 for any rotation within a few degrees of a grid angle (see mlp.train_mlp), and it
+# keeps NN2 from amplifying the camera's noise. A part without symmetry (kappa 1) maps the
+# whole circle and needs the looser fit.
 NN2_WEIGHT_DECAY = 1e-2
 NN2_WEIGHT_DECAY_NO_SYMMETRY = 1e-3
 # NN2 of a part this round (kappa >= WIDEN_MIN_KAPPA: the nut) also learns from copies of each
 # ROI widened on one side: the ROI's maximum with itself shifted by up to NN2_WIDEN_PX in a
 # random direction, NN2_WIDEN_COPIES of them, with the same turn. A lamp-lit flank widens the
-# outline on its side; the hexagon's features change so little per degree that NN2 read that
-# as a turn (nut, poor light, seed 3: mean -1.28 deg over 100 trials without the copies, -0.09
-# over 200 with them, RMS after 2.5 loops 1.42 -> 0.82; the cube, whose features change more,
-# lost 0.03 deg with them, 100 trials, and learns without).
+# outline on its side, and the hexagon's features change so little per degree that NN2 would
+# read that as a turn; a part whose features change more learns without them.
 NN2_WIDEN_PX = 1.0
 NN2_WIDEN_COPIES = 4
 WIDEN_MIN_KAPPA = 6
@@ -402,11 +392,20 @@ def _area_and_shape(sets: dict[str, Dataset], located: dict[str, list[np.ndarray
 def _taught_view(sets: dict[str, Dataset], found: dict[str, list[Localisation]],
                  usable: dict[str, np.ndarray]) -> tuple[list[float], Any, tuple]:
     """The part's areas at the taught pose, its outline there (None: not seen there) and
-    turned (the NN2 grid's images turn it over its symmetry period): where the loop
-    settles."""
+    turned (``fit_outline_stage``): where the loop settles."""
     at_pose = [found[name][i] for name in sets
                for i in np.flatnonzero(at_taught_pose(sets[name].labels)) if found[name][i].ok]
     taught = [loc.area_px for loc in at_pose]
+    return (taught, *fit_outline_stage(sets, found, usable, at_pose))
+
+
+def fit_outline_stage(sets: dict[str, Dataset], found: dict[str, list[Localisation]],
+                      usable: dict[str, np.ndarray], at_pose: list[Localisation]
+                      ) -> tuple[Any, tuple]:
+    """The ``outline`` stage's fit (``calibration_free.outline``): the part's outline in the
+    first frame at the taught pose (``at_pose``; None: not seen there) and turned, as the NN2
+    grid's images turn it over its symmetry period. The front end keeps both
+    (``FrontEnd.taught_outline_px``, ``turned_outlines_px``)."""
     outline = (taught_outline(at_pose[0].part_mask, at_pose[0].u_px, at_pose[0].v_px)
                if at_pose else None)
     turned = ()
@@ -416,7 +415,7 @@ def _taught_view(sets: dict[str, Dataset], found: dict[str, list[Localisation]],
             sets["nn2"].labels[usable["nn2"], 2],
             [taught_outline(nn2[i].part_mask, nn2[i].u_px, nn2[i].v_px)
              for i in usable["nn2"]])
-    return taught, outline, turned
+    return outline, turned
 
 
 def _blob_at(preprocessed: np.ndarray, threshold: float, polarity: Polarity,
@@ -568,7 +567,10 @@ class TrainingSettings:
     (``prepare_training``); fine_axis: for an elongated part (screw, ledge), fit the map from
     its long axis to the turn near the taught pose (``calibration_free.axis``; False: NN2
     alone); edge_gamma: the camera's output gamma, with which the part's centre is read from
-    the colour along its edge (``localise.colour_centre``; 0: from the channel's grey levels).
+    the colour along its edge (``localise.colour_centre``; 0: from the channel's grey levels);
+    stages: the optional perception stages the bundle runs (``stages.OPTIONAL_STAGES``): each
+    is fitted, and one that cannot be is refused in one line; the bundle keeps the list
+    (``training["stages"]``). None: every one the part's training fits, as it fits them.
     """
 
     gabor: GaborConfig | None = None
@@ -582,6 +584,7 @@ class TrainingSettings:
     localisation_channel: Channel | Literal["auto"] = "auto"
     fine_axis: bool = True
     edge_gamma: float = 0.0
+    stages: tuple[StageName, ...] | None = None
 
 
 def train_bundle(nn1_data: Dataset, nn2_data: Dataset, *, object_kind: str, kappa: int,
@@ -591,10 +594,11 @@ def train_bundle(nn1_data: Dataset, nn2_data: Dataset, *, object_kind: str, kapp
 
     Steps: the front end (``prepare_training``: intensity statistics of the max-channel
     images, the localisation channel and its Otsu threshold, the area window and shape of the
-    part, the localisation of every image), then the translation nets (``_translation_nets``:
+    part, the localisation of every image), then the translation nets (``fit_translation_nets``:
     NN1 on (u, v) -> (dx, dy), the full loop's translation net on (u, v, sin, cos of kappa
     dphi) and its correction near the pose), NN2 on Gabor features -> (sin, cos)(kappa dphi)
-    (``train_nn2``) and, for an elongated part, the long axis (``_fine_axis``). Images where
+    (``train_nn2``) and, for an elongated part, the long axis (``fit_axis_stage``, with a
+    bar's ends: ``fit_ends_stage``). Images where
     the object is not found are skipped with a warning and counted.
 
     Args:
@@ -616,15 +620,15 @@ def train_bundle(nn1_data: Dataset, nn2_data: Dataset, *, object_kind: str, kapp
             sizes differ, a training image is flat, the "object" covers most of the image
             (wrong polarity), or the object is found in fewer than half of a set's images.
     """
-    gabor, nn2_hidden, seed = settings.gabor, settings.nn2_hidden, settings.seed
-    nn2_weight_decay, nn2_widen_px = settings.nn2_weight_decay, settings.nn2_widen_px
+    seed, stages = settings.seed, settings.stages
     start = time.perf_counter()
-    gabor = gabor or GaborConfig()
+    gabor = settings.gabor or GaborConfig()
     pose = check_part(object_kind, kappa, nominal_pose)
     sets = training_sets(nn1_data, nn2_data, nn1_extra)
     prep = prepare_training(sets, settings.polarity, settings.localisation_channel,
                             settings.edge_gamma)
-    nets = _translation_nets(sets, prep, nn2_data, kappa, seed, settings.nn1_epochs)
+    nets = fit_translation_nets(sets, prep, nn2_data, kappa, seed, settings.nn1_epochs)
+    nn2_weight_decay, nn2_widen_px = settings.nn2_weight_decay, settings.nn2_widen_px
     if nn2_weight_decay is None:
         nn2_weight_decay = default_nn2_weight_decay(kappa)
     if nn2_widen_px is None:
@@ -633,10 +637,10 @@ def train_bundle(nn1_data: Dataset, nn2_data: Dataset, *, object_kind: str, kapp
             for i in prep.usable["nn2"]]
     nn2_labels = nn2_data.labels[prep.usable["nn2"]]
     nn2 = train_nn2(rois, nn2_labels[:, 2], kappa, gabor, seed=seed,
-                    hidden=nn2_hidden, epochs=settings.nn2_epochs,
+                    hidden=settings.nn2_hidden, epochs=settings.nn2_epochs,
                     weight_decay=nn2_weight_decay, widen_px=nn2_widen_px)
-    axis = _fine_axis(prep, rois, nn2_labels, kappa, gabor.roi_px) if settings.fine_axis \
-        else None
+    axis = _fit_optional_stages(prep, rois, nn2_labels, object_kind, kappa, gabor.roi_px,
+                                settings)
     training = {
         "seed": seed,
         "samples": {name: len(d) for name, d in sets.items()},
@@ -644,10 +648,8 @@ def train_bundle(nn1_data: Dataset, nn2_data: Dataset, *, object_kind: str, kapp
         "preprocess_seconds": prep.seconds,
         **nets.training(kappa),
         "nn2": {**_summary(nn2), "weight_decay": nn2_weight_decay, "widen_px": nn2_widen_px},
-        "axis": ({"samples": axis.samples, "whole_rms_deg": axis.whole_rms_deg,
-                  "near_rms_deg": axis.near_rms_deg, "elongation": axis.elongation,
-                  "ends_rms_px": None if axis.ends is None else list(axis.ends.rms_px)}
-                 if axis is not None else None),
+        "axis": _axis_summary(axis),
+        **({} if stages is None else {"stages": list(stages)}),
         "seconds": time.perf_counter() - start,
         "created_utc": time.strftime("%Y-%m-%dT%H:%M:%SZ", time.gmtime()),
     }
@@ -664,9 +666,46 @@ def train_bundle(nn1_data: Dataset, nn2_data: Dataset, *, object_kind: str, kapp
                                    for i in np.flatnonzero(at_taught_pose(data.labels))])
 
 
+def _fit_optional_stages(prep: PreparedSets, rois: list[np.ndarray], nn2_labels: np.ndarray,
+                         object_kind: str, kappa: int, roi_px: int,
+                         settings: TrainingSettings) -> AxisMap | None:
+    """The axis map with the ends where ``settings`` ask for them (``fit_axis_stage``,
+    ``fit_ends_stage``; the outline stage's fit is the front end's), after checking that
+    every stage ``settings.stages`` names has its data.
+
+    Raises:
+        TrainingError: a stage named could not be fitted for this part (one line).
+    """
+    stages, axis = settings.stages, None
+    if settings.fine_axis and _named(stages, "axis", "ends"):
+        axis = fit_axis_stage(prep, rois, nn2_labels, kappa, roi_px)
+        if axis is not None and kappa == 2 and _named(stages, "ends"):
+            axis = dataclasses.replace(
+                axis, ends=fit_ends_stage(prep, nn2_labels, axis.direction))
+    try:
+        check_stages(stages, axis, prep.front)
+    except BundleError as exc:
+        raise TrainingError(f"{object_kind}: {exc}") from exc
+    return axis
+
+
+def _named(stages: tuple[str, ...] | None, *names: str) -> bool:
+    """Whether a stage list names one of ``names`` (None names every stage)."""
+    return stages is None or any(name in stages for name in names)
+
+
+def _axis_summary(axis: AxisMap | None) -> dict | None:
+    """What the model file's training metadata keeps of the axis map's fit."""
+    if axis is None:
+        return None
+    return {"samples": axis.samples, "whole_rms_deg": axis.whole_rms_deg,
+            "near_rms_deg": axis.near_rms_deg, "elongation": axis.elongation,
+            "ends_rms_px": None if axis.ends is None else list(axis.ends.rms_px)}
+
+
 @dataclass
-class TranslationNets:
-    """The trained translation nets (``_translation_nets``) and what their training left."""
+class FittedTranslationNets:
+    """The trained translation nets (``fit_translation_nets``) and what their training left."""
 
     nn1: TrainedMLP
     nn1_zero_offset: list[float]
@@ -689,10 +728,11 @@ class TranslationNets:
         }
 
 
-def _translation_nets(sets: dict[str, Dataset], prep: PreparedSets, nn2_data: Dataset,
-                      kappa: int, seed: int, epochs: int) -> TranslationNets:
-    """NN1 on (u, v) -> (dx, dy); the full loop's translation net on (u, v, sin, cos of kappa
-    dphi); and its correction near the taught pose; each pinned on the frames there."""
+def fit_translation_nets(sets: dict[str, Dataset], prep: PreparedSets, nn2_data: Dataset,
+                         kappa: int, seed: int, epochs: int) -> FittedTranslationNets:
+    """The translation nets' fit: NN1 on (u, v) -> (dx, dy); the full loop's translation net
+    on (u, v, sin, cos of kappa dphi); and its correction near the taught pose; each pinned on
+    the frames there."""
     uv, labels = nn1_samples(sets, prep)
     uvsc, dxdy, at_nominal = _translation_samples(uv, labels, kappa)
     if not at_nominal.any():
@@ -717,29 +757,34 @@ def _translation_nets(sets: dict[str, Dataset], prep: PreparedSets, nn2_data: Da
     nn1_near, nn1_near_zero_offset = _train_pinned(uvsc[near], residual, at_nominal[near],
                                                    seed + 3, epochs, NN1_ROT_HIDDEN,
                                                    default_near_weight_decay(kappa))
-    return TranslationNets(nn1, nn1_zero_offset, nn1_rot, nn1_rot_zero_offset, nn1_near,
+    return FittedTranslationNets(nn1, nn1_zero_offset, nn1_rot, nn1_rot_zero_offset, nn1_near,
                            nn1_near_zero_offset, near_mm, int(near.sum()), nominal_uv)
 
 
-def _fine_axis(prep: PreparedSets, rois: list[np.ndarray], nn2_labels: np.ndarray, kappa: int,
-               roi_px: int):
-    """An elongated part's long axis, which reads the turn near the taught pose
-    (``calibration_free.axis``; None for a part that is not elongated), with a bar's ends
-    (``calibration_free.ends``) where kappa is 2."""
+def fit_axis_stage(prep: PreparedSets, rois: list[np.ndarray], nn2_labels: np.ndarray,
+                   kappa: int, roi_px: int) -> AxisMap | None:
+    """The ``axis`` stage's fit: an elongated part's long axis, which reads the turn near the
+    taught pose (``calibration_free.axis``; None for a part that is not elongated), on the
+    part's coverage where every NN2 image's centre was read from colour, else on the
+    features' ROIs."""
     at_taught = at_taught_pose(nn2_labels)
-    # the axis reads the part's coverage where every image's centre was read from colour
     found = [prep.found["nn2"][i] for i in prep.usable["nn2"]]
     coverage = [prep.front.coverage_roi(loc, roi_px) for loc in found]
-    axis = (fit_axis(coverage, prep.centres("nn2"), nn2_labels[:, 2], at_taught, kappa,
+    return (fit_axis(coverage, prep.centres("nn2"), nn2_labels[:, 2], at_taught, kappa,
                      "coverage") if all(c is not None for c in coverage) else
             fit_axis(rois, prep.centres("nn2"), nn2_labels[:, 2], at_taught, kappa))
-    if axis is not None and kappa == 2:  # a bar with a hidden end (calibration_free.ends)
-        usable = prep.usable["nn2"]
-        ends = fit_ends([prep.normalised["nn2"][i] for i in usable],
-                        [prep.found["nn2"][i].part_mask for i in usable],
-                        prep.centres("nn2"), at_taught, axis.direction, prep.front.threshold)
-        axis = dataclasses.replace(axis, ends=ends)
-    return axis
+
+
+def fit_ends_stage(prep: PreparedSets, nn2_labels: np.ndarray,
+                   direction: tuple[float, float]) -> EndMap | None:
+    """The ``ends`` stage's fit: a bar's ends (``calibration_free.ends``) on the NN2 set's
+    images, along the long axis' ``direction`` at the taught pose (None: too few images
+    near it)."""
+    usable = prep.usable["nn2"]
+    return fit_ends([prep.normalised["nn2"][i] for i in usable],
+                    [prep.found["nn2"][i].part_mask for i in usable],
+                    prep.centres("nn2"), at_taught_pose(nn2_labels), direction,
+                    prep.front.threshold)
 
 
 def pinned_as_read(bundle: ModelBundle, taught_images: list[np.ndarray]) -> ModelBundle:
