@@ -25,6 +25,7 @@ from calibration_free.baselines.hough.model import HoughConfig
 from calibration_free.baselines.pca.model import PcaConfig
 from calibration_free.gabor import GaborConfig
 from calibration_free.localise import DEFAULT_CAMERA_GAMMA
+from calibration_free.stages import StageName
 from calibration_free.training import NN2_HIDDEN
 from controller.loop.positioning import LoopConfig
 from drivers.core.errors import ConfigError
@@ -73,7 +74,15 @@ class PerceptionConfig:
     edges, ``calibration_free.localise.colour_centre``), or ``grey``, by the localisation
     channel's grey level; camera_gamma: the camera's output gamma (``colour`` reads in linear
     light: a delivered grey level g is (g / 255) ** camera_gamma; 2.2 for an sRGB-like
-    camera, 1 for a linear one).
+    camera, 1 for a linear one);
+    stages: the optional perception stages the part's model runs
+    (``calibration_free.stages``): ``ends`` (a bar with one end hidden is centred where the end
+    it shows puts it), ``outline`` (a part partly hidden is centred on the outline it shows)
+    and ``axis`` (an elongated part's turn from its long axis); each named is fitted and run,
+    and one the part cannot have (``axis`` for a part that is not elongated, ``ends`` for one
+    that is not a bar) fails training in one line; one left out is skipped. Unset: every one
+    the part's training fits (``axis``, and ``ends`` for a bar, where ``axis`` is true), and
+    every one whose data the model has runs.
     """
 
     gabor: GaborConfig = GaborConfig()
@@ -89,10 +98,18 @@ class PerceptionConfig:
     axis: bool = True
     edge_coverage: Literal["colour", "grey"] = "colour"
     camera_gamma: float = field(default=DEFAULT_CAMERA_GAMMA, metadata={"min": 1.0, "max": 3.0})
+    stages: tuple[StageName, ...] | None = None
 
     def __post_init__(self) -> None:
         if not 1 <= len(self.nn2_hidden) <= 8:  # with <= 4096 units each: fits in memory
             raise ValueError(f"nn2_hidden: 1 to 8 hidden layers, got {len(self.nn2_hidden)}")
+        if self.stages is not None:
+            if len(set(self.stages)) != len(self.stages):
+                raise ValueError(f"stages: each stage once, got {list(self.stages)}")
+            needs_axis = [s for s in self.stages if s in ("axis", "ends")]
+            if needs_axis and not self.axis:
+                raise ValueError(f"stages: {needs_axis[0]} needs the long axis, but axis is "
+                                 f"false")
 
     @property
     def edge_gamma(self) -> float:

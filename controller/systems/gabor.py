@@ -162,7 +162,8 @@ class GaborSystem(VisionSystem):
             nn2_weight_decay=perception_cfg.nn2_weight_decay,
             nn2_widen_px=perception_cfg.nn2_widen_px,
             localisation_channel=perception_cfg.localisation_channel, seed=perception_cfg.seed,
-            fine_axis=perception_cfg.axis, edge_gamma=perception_cfg.edge_gamma)
+            fine_axis=perception_cfg.axis, edge_gamma=perception_cfg.edge_gamma,
+            stages=perception_cfg.stages)
         bundle = train_bundle(nn1, nn2, object_kind=state.object_kind, kappa=state.kappa,
                               nominal_pose=state.nominal_pose, settings=settings,
                               nn1_extra=nn2 if perception_cfg.nn1_uses_nn2_set else None)

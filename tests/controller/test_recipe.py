@@ -14,7 +14,7 @@ from calibration_free.synthetic import SyntheticCell, render
 from controller.cli import main
 from controller.config import load_config
 from controller.fine_positioner import FinePositioner
-from controller.recipe import DEFAULT_RECIPE, recipe_of_model
+from controller.recipe import DEFAULT_RECIPE, recipe_from_mapping, recipe_of_model
 from controller.systems.gabor import GaborSystem
 from drivers.core.errors import ConfigError
 
@@ -104,3 +104,15 @@ def test_a_model_file_written_before_recipes_loads_and_runs_with_the_defaults():
     image = render(SyntheticCell(), np.zeros(3), np.random.default_rng(1))
     tr = estimator.estimate_translation(image)
     assert tr.status == "ok" and abs(tr.dx_mm) < 0.3 and abs(tr.dy_mm) < 0.3
+
+
+@pytest.mark.parametrize("stages", [["axis"], ["ends", "outline"]])
+def test_a_recipe_naming_the_long_axis_stages_without_the_axis_is_refused(stages):
+    with pytest.raises(ConfigError, match=r"^r: perception: stages: .* needs the long axis"):
+        recipe_from_mapping({"perception": {"axis": False, "stages": stages}}, "r")
+
+
+def test_the_default_recipe_names_no_stages():
+    assert DEFAULT_RECIPE.perception.stages is None
+    assert recipe_from_mapping({"perception": {"stages": ["outline"]}}).perception.stages \
+        == ("outline",)
