@@ -174,6 +174,8 @@ def type_name(tp: Any) -> str:
             inner = {type_name(a) for a in args}
             return f"list of {len(args)} {inner.pop()}s" if len(inner) == 1 else \
                 "list (" + ", ".join(type_name(a) for a in args) + ")"
+        if args and typing.get_origin(args[0]) is Literal:
+            return f"list of {type_name(args[0])}"
         return f"list of {type_name(args[0])}s" if args else "list"
     if origin is dict:
         return f"mapping {type_name(args[0])} -> {type_name(args[1])}" if args else "mapping"
