@@ -8,9 +8,11 @@ channel and intensity normalisation, or saturation; ``localise`` the object's ce
 ``roi`` (50x50 window) -> ``gabor`` (36 features) -> ``mlp`` (NN1: centre -> translation, NN2:
 features -> rotation through the ``angles`` codec). ``perception`` runs a trained bundle on a
 frame (``Perception.translation``, ``rotation`` going on from that percept, ``perceive`` for
-both); ``training`` learns the front end (``prepare_training``) and the networks
-(``train_bundle``, ``train_nn2``) from ``dataset`` files; ``bundle`` is the trained model,
-stored through ``model_file`` (``TaughtModel``: every system's save and load).
+both) through the named ``stages`` (localiser, the occlusion fallbacks ``ends`` and
+``outline``, NN2 and the long ``axis``, the translation nets); ``training`` learns the front
+end (``prepare_training``) and the networks (``train_bundle``, ``train_nn2``) from ``dataset``
+files; ``bundle`` is the trained model, stored through ``model_file`` (``TaughtModel``: every
+system's save and load).
 
 ``baselines`` holds the paper's two other systems on the same front end and model file:
 ``baselines/pca`` (eigenimages, B-spline fuzzy controller) and ``baselines/hough`` (line Hough
