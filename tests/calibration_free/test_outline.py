@@ -231,7 +231,8 @@ def test_perception_centres_a_part_under_a_card_and_says_how_much_is_hidden(
     sliver = frame.copy()
     sliver[:rows[0] + 3, cols[0] - 15:cols[-1] + 15] = (70, 80, 115)
     thin = perception.translation(sliver)
-    assert thin.ok and 0.03 < 1.0 - perception._front.seen_share(thin.localisation.area_px) < 0.1
+    assert thin.ok and 0.03 < 1.0 - saturation_bundle.front.seen_share(
+        thin.localisation.area_px) < 0.1
     assert thin.hidden_share is not None
     assert math.dist(thin.centre_px, whole.centre_px) < 0.5, (thin.centre_px, whole.centre_px)
 
