@@ -57,8 +57,9 @@ def _normalized(line: str) -> str:
 
 def _is_echo(line: str, wanted: str) -> bool:
     text = _normalized(line)
-    # After stale bytes the echo follows their prompt on the same line: ".where".
-    return text == wanted or (text.startswith(".") and text[1:].lstrip() == wanted)
+    # After stale bytes the echo follows their prompt on the same line: ".where", or
+    # "*listp fpstop" after the prompt of a program that was still running.
+    return text == wanted or (text[:1] in (".", "*") and text[1:].lstrip() == wanted)
 
 
 def _after_echo(lines: list[str], command: str) -> list[str] | None:

@@ -68,6 +68,8 @@ def test_bad_replies_raise_protocol_error(data):
     (b"do move here:", "do move here:", False),     # the echo is not a wrong-input line
     (b"do move here:\r\n.", "do move here:", True),
     (b"\r\n.", "speed 5", False),                     # a stale prompt before the echo
+    # the prompt of a program still running when the command went, ending as it replied
+    (b"*listp fpstop\r\nPROGRAM fpstop\r\n  1  STOP\r\nEND\r\n.", "listp fpstop", True),
     (b"\r\nInitialize (Y/N)? ", None, True),
     (b"   300.", None, False),                         # a number is not the prompt
 ])
