@@ -23,9 +23,9 @@ import cv2
 
 from drivers.core.errors import ConfigError
 from drivers.core.files import atomic_write_bytes
-from drivers.core.parts import PARTS, Catalogue
+from drivers.core.parts import Catalogue
 from drivers.core.pose import ToolStep
-from sim_backend.cell.scene_config import SceneConfig, load_parts, load_scene
+from sim_backend.cell.scene_config import SceneConfig, load_cell
 from sim_backend.cell.sim_cell import SimCell
 
 logger = logging.getLogger(__name__)
@@ -84,8 +84,7 @@ def snapshot(scene: SceneConfig, offset: ToolStep, seed: int = 0,
 def run(args: argparse.Namespace) -> int:
     if args.out.suffix.lower() != ".png":
         raise ConfigError(f"--out: the image is written as PNG, name it *.png (got {args.out})")
-    scene = load_scene(args.config) if args.config else SceneConfig()
-    parts = load_parts(args.config) if args.config else PARTS
+    scene, parts = load_cell(args.config)
     if args.part is not None:
         if args.part not in parts:
             raise ConfigError(f"--part: {parts.unknown(args.part)}")

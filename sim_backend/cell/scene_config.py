@@ -307,3 +307,11 @@ def load_parts(path: str | Path) -> catalogue.Catalogue:
     except ConfigError as exc:
         raise ConfigError(f"{path}: {exc}") from exc
     return catalogue.PARTS.with_declared(declared)
+
+
+def load_cell(path: str | Path | None) -> tuple[SceneConfig, catalogue.Catalogue]:
+    """The scene and the parts of the root config file ``path`` (``load_scene``,
+    ``load_parts``); without a file, the default scene and the built-in parts."""
+    if not path:
+        return SceneConfig(), catalogue.PARTS
+    return load_scene(path), load_parts(path)

@@ -33,14 +33,13 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
-    from sim_backend.cell.scene_config import SceneConfig, load_parts, load_scene
+    from sim_backend.cell.scene_config import load_cell
     from sim_backend.cell.sim_cell import (
         SimCell,  # PyBullet is imported only when the cell is needed
     )
     from sim_backend.devices import SimWrenchSensor
 
-    scene = load_scene(args.config) if args.config else SceneConfig()
-    parts = load_parts(args.config) if args.config else None
+    scene, parts = load_cell(args.config)
     timing = timing_from_args(args)
     with SimCell(scene, seed=args.seed, parts=parts) as cell, SimWrenchSensor(cell) as sensor, \
             AtiEmulator(sensor, args.counts_per_force, args.counts_per_torque,

@@ -56,14 +56,13 @@ def _camera(args: argparse.Namespace, stack: contextlib.ExitStack) -> Camera:
     if args.source is not None:
         source = int(args.source) if args.source.isdigit() else args.source
         return OpenCvCamera(OpenCvCameraConfig(source=source))
-    from sim_backend.cell.scene_config import SceneConfig, load_parts, load_scene
+    from sim_backend.cell.scene_config import load_cell
     from sim_backend.cell.sim_cell import (
         SimCell,  # PyBullet is imported only when the cell is needed
     )
     from sim_backend.devices import SimCamera
 
-    scene = load_scene(args.config) if args.config else SceneConfig()
-    parts = load_parts(args.config) if args.config else None
+    scene, parts = load_cell(args.config)
     config = timing_from_args(args)
     timing = cell_timing("realistic", config, wall=True) if config else None
     return SimCamera(stack.enter_context(SimCell(scene, seed=args.seed, parts=parts)), timing)

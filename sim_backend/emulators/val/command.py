@@ -111,7 +111,7 @@ def wait_for_stop_signal() -> int:
 
 
 def run(args: argparse.Namespace) -> int:
-    from sim_backend.cell.scene_config import SceneConfig, load_parts, load_scene
+    from sim_backend.cell.scene_config import load_cell
     from sim_backend.cell.sim_cell import (
         SimCell,  # PyBullet is imported only when the cell is needed
     )
@@ -125,8 +125,7 @@ def run(args: argparse.Namespace) -> int:
     if args.write_config and (args.mjpeg is None or not (args.ati or args.ati_tcp is not None)):
         raise ConfigError("--write-config: serve all three devices of the cell (--ati and "
                           "--mjpeg), or a simulated device in the client would be another cell")
-    scene = load_scene(args.config) if args.config else SceneConfig()
-    parts = load_parts(args.config) if args.config else None
+    scene, parts = load_cell(args.config)
     with contextlib.ExitStack() as stack:
         cell = stack.enter_context(SimCell(scene, seed=args.seed, parts=parts))
         emulators = stack.enter_context(CellEmulators(

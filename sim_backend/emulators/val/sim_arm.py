@@ -22,11 +22,10 @@ SIM_KINEMATICS = Puma260(tool_length_mm=TOOL_LENGTH_MM)
 def simulated_arm(scene_path: str | None = None, seed: int = 0) -> Iterator[Arm]:
     """A connected, active SimArm in a new SimCell (scene from the config file at
     ``scene_path``, else the default scene); closed on exit."""
-    from sim_backend.cell.scene_config import SceneConfig, load_parts, load_scene
+    from sim_backend.cell.scene_config import load_cell
     from sim_backend.cell.sim_cell import SimCell
     from sim_backend.devices import SimArm
 
-    scene = load_scene(scene_path) if scene_path else SceneConfig()
-    parts = load_parts(scene_path) if scene_path else None
+    scene, parts = load_cell(scene_path)
     with SimCell(scene, seed=seed, parts=parts) as cell, SimArm(cell, None) as arm:
         yield arm
