@@ -110,27 +110,26 @@ def _gaussian(values: np.ndarray, extra: np.ndarray) -> tuple[np.ndarray, np.nda
     return values.mean(axis=0), 0.5 * (icov + icov.T)
 
 
-def _matrix(values: Any, name: str) -> np.ndarray:
+def _numbers(values: Any, count: int, name: str, what: str) -> np.ndarray:
+    """``values`` as ``count`` finite float64 numbers, or ConfigError naming ``name``."""
     try:
-        matrix = np.array([float(v) for v in values], np.float64)
+        numbers = np.array([float(v) for v in values], np.float64)
     except (TypeError, ValueError):
-        matrix = np.zeros(0)
-    if matrix.size != 9 or not np.isfinite(matrix).all():
-        raise ConfigError(f"part colour: {name} must be nine finite numbers")
-    matrix = matrix.reshape(3, 3)
+        numbers = np.zeros(0)
+    if numbers.size != count or not np.isfinite(numbers).all():
+        raise ConfigError(f"part colour: {name} must be {what} finite numbers")
+    return numbers
+
+
+def _matrix(values: Any, name: str) -> np.ndarray:
+    matrix = _numbers(values, 9, name, "nine").reshape(3, 3)
     if not np.allclose(matrix, matrix.T) or np.linalg.eigvalsh(matrix).min() <= 0:
         raise ConfigError(f"part colour: {name} must be symmetric and positive definite")
     return matrix
 
 
 def _vector(values: Any, name: str) -> np.ndarray:
-    try:
-        vector = np.array([float(v) for v in values], np.float64)
-    except (TypeError, ValueError):
-        vector = np.zeros(0)
-    if vector.size != 3 or not np.isfinite(vector).all():
-        raise ConfigError(f"part colour: {name} must be three finite numbers")
-    return vector
+    return _numbers(values, 3, name, "three")
 
 
 @dataclass(frozen=True)
