@@ -280,39 +280,59 @@ class _CellJob:
     rezero_heading_step: float | None = None
 
 
+def training_config(config, cell: CellDraw):
+    """``config`` with the drawn ``cell`` under its training light, and the gain of its fixed
+    exposure (None: auto-exposure); the trials run with its ``scene.camera``."""
+    return with_fixed_exposure(cell_config(config, cell, cell.train_light), cell, cell.seed)
+
+
+def train_cell(system: str, train_cfg, cell: CellDraw, work_dir: Path):
+    """Teach, acquire and train ``system`` on ``train_cfg`` (``training_config``), the drawn
+    ``cell``, with that config's recipe; the trained model.
+
+    Raises:
+        FineposError: the cell cannot be taught or trained.
+    """
+    models, _ = train_systems_on_cell((system,), train_cfg, work_dir, cell.seed, progress=False)
+    return models[system]
+
+
+def run_cell_trial(system: str, model, config, cell: CellDraw, camera, trial: TrialDraw,
+                   work_dir: Path, grasp: bool) -> dict:
+    """One drawn trial on a trained cell (the trial's light, card and clutter, the cell's
+    ``camera``): its report record."""
+    trial_cfg = cell_config(config, cell, trial.light, trial.occluder, trial.clutter)
+    trial_cfg = dataclasses.replace(trial_cfg, scene=dataclasses.replace(
+        trial_cfg.scene, camera=camera))
+    run = run_trials(system, model, trial_cfg, 1, trial.seed, work_dir=work_dir, grasp=grasp,
+                     progress=False, measure_visible=True)
+    return _trial_record(cell, trial, run["states"][0], run)
+
+
 def _run_cell(job: _CellJob, tick: Tick) -> dict:
     """Train on a drawn cell, then run its trials; one record per trial."""
     cell = job.cell
-    train_cfg = cell_config(job.config, cell, cell.train_light)
-    train_cfg, gain = with_fixed_exposure(train_cfg, cell, cell.seed)
-    camera = train_cfg.scene.camera
     records = []
     with tempfile.TemporaryDirectory(prefix="finepos-random-") as tmp:
+        train_cfg, gain = training_config(job.config, cell)
+        camera = train_cfg.scene.camera
         t0 = time.perf_counter()
         try:
-            models, _ = train_systems_on_cell((job.system,), train_cfg, Path(tmp) / "train",
-                                              cell.seed, progress=False)
+            trained = train_cell(job.system, train_cfg, cell, Path(tmp) / "train")
         except FineposError as exc:  # the cell cannot be taught: every trial on it fails
             logger.warning("randomized cell %d: not trained: %s", cell.index, exc)
             for trial in job.trials:
-                records.append(_untrained_record(cell, trial, str(exc)))
+                records.append(untrained_record(cell, trial, str(exc)))
                 tick()
             return {"cell": cell.index, "fixed_gain": gain, "train_seconds": None,
                     "train_error": str(exc), "records": records}
         train_s = time.perf_counter() - t0
-        trained = models[job.system]
         for trial in job.trials:
             model, rezero = trained, None
             if job.rezero:
                 model, rezero = _rezeroed(job, trained, camera, trial, Path(tmp) / "rezero")
-            trial_cfg = cell_config(job.config, cell, trial.light, trial.occluder, trial.clutter)
-            trial_cfg = dataclasses.replace(trial_cfg, scene=dataclasses.replace(
-                trial_cfg.scene, camera=camera))
-            run = run_trials(job.system, model, trial_cfg, 1, trial.seed,
-                             work_dir=Path(tmp) / "eval", grasp=job.grasp, progress=False,
-                             measure_visible=True)
-            states = run["states"][0]
-            record = _trial_record(cell, trial, states, run)
+            record = run_cell_trial(job.system, model, job.config, cell, camera, trial,
+                                    Path(tmp) / "eval", job.grasp)
             records.append(record if rezero is None else {**record, "rezero": rezero})
             tick()
     return {"cell": cell.index, "fixed_gain": gain, "train_seconds": train_s,
@@ -346,7 +366,7 @@ def _trial_record(cell: CellDraw, trial: TrialDraw, states, run: dict) -> dict:
             "draw": trial.factors}
 
 
-def _untrained_record(cell: CellDraw, trial: TrialDraw, reason: str) -> dict:
+def untrained_record(cell: CellDraw, trial: TrialDraw, reason: str) -> dict:
     return {"cell": cell.index, "seed": trial.seed, "visible": None, "outcome": "untrained",
             "reason": reason, "error": None, "safe_1.5": False, "safe_2.5": False,
             "loops_to_safe": None, "grasped": False, "draw": trial.factors}

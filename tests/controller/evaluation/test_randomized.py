@@ -91,7 +91,7 @@ def test_an_untrained_cell_counts_against_every_figure_but_the_rms():
     cells = [_cell(0)]
     plan = _plan(0, trials=1, per_cell=1)
     cell, (trial,) = plan[0]
-    untrained = rz._untrained_record(cell, trial, "the object was found in none")
+    untrained = rz.untrained_record(cell, trial, "the object was found in none")
     out = rz.summarise_randomized([untrained, _record(0, 1.0, "converged", [0, 0, 0])], cells)
     assert out["visible_0.8"]["safe_2.5"]["rate"] == 0.5
     assert out["visible_0.8"]["rms_2.5"]["x_mm"] == 0.0
