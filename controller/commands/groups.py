@@ -22,6 +22,7 @@ BENCH_LEAVES = {
     "camera-stream": "sim_backend.emulators.mjpeg.bench",
     "recording": "controller.recording.bench",
     "symmetry": "controller.evaluation.symmetry_bench",
+    "ablation": "controller.evaluation.ablation",
 }
 
 DOCS_LEAVES = {
