@@ -41,14 +41,14 @@ from controller.commands.common import (
     positive_int,
     run_config_from_args,
 )
-from controller.config import recipe_of, with_part, with_recipe
+from controller.config import recipe_of, with_recipe
 from controller.evaluation.comparison.pools import Tick, open_pool
 from controller.evaluation.randomized import (
     TRIALS_PER_CELL,
     VISIBLE_SAFE,
     CellDraw,
     TrialDraw,
-    draw_plan,
+    planned,
     run_cell_trial,
     summarise_randomized,
     train_cell,
@@ -254,11 +254,8 @@ def evaluate_ablation(config, *, variants: tuple[str, ...], trials: int, seed: i
     unknown = [v for v in variants if v not in BY_NAME]
     if unknown:
         raise FineposError(f"unknown variant {unknown[0]!r} (one of {', '.join(BY_NAME)})")
-    if trials < 1:
-        raise FineposError(f"--trials must be at least 1, got {trials}")
     t0 = time.perf_counter()
-    config = with_part(config, config.scene.object.kind)
-    plan = draw_plan(config, trials=trials, seed=seed, trials_per_cell=trials_per_cell)
+    config, plan = planned(config, trials=trials, seed=seed, trials_per_cell=trials_per_cell)
     jobs = [_CellJob(config, cell, draws, variants) for cell, draws in plan]
     with open_pool(min(workers, len(jobs))) as pool:
         results = pool.run(_run_cell, jobs, weights=[len(j.trials) for j in jobs],

@@ -394,6 +394,18 @@ def draw_plan(config, *, trials: int, seed: int, trials_per_cell: int
     return plan
 
 
+def planned(config, *, trials: int, seed: int, trials_per_cell: int):
+    """``config`` with its scene's part set up, and its ``draw_plan``.
+
+    Raises:
+        FineposError: no trials.
+    """
+    if trials < 1:
+        raise FineposError(f"--trials must be at least 1, got {trials}")
+    config = with_part(config, config.scene.object.kind)
+    return config, draw_plan(config, trials=trials, seed=seed, trials_per_cell=trials_per_cell)
+
+
 def evaluate_randomized(system: str, config, *, trials: int, seed: int,
                         trials_per_cell: int = TRIALS_PER_CELL, grasp: bool = True,
                         workers: int = 1, progress: bool = True, rezero: bool = False,
@@ -409,11 +421,8 @@ def evaluate_randomized(system: str, config, *, trials: int, seed: int,
     """
     if system not in SYSTEMS:
         raise FineposError(f"unknown system {system!r} (one of {', '.join(SYSTEMS)})")
-    if trials < 1:
-        raise FineposError(f"--trials must be at least 1, got {trials}")
     t0 = time.perf_counter()
-    config = with_part(config, config.scene.object.kind)
-    plan = draw_plan(config, trials=trials, seed=seed, trials_per_cell=trials_per_cell)
+    config, plan = planned(config, trials=trials, seed=seed, trials_per_cell=trials_per_cell)
     jobs = [_CellJob(system, config, cell, draws, grasp, rezero, rezero_heading_step)
             for cell, draws in plan]
     with open_pool(min(workers, len(jobs))) as pool:
