@@ -177,20 +177,20 @@ def _run_cell(job: _CellJob, tick: Tick) -> dict:
     names = (WHOLE, *job.variants)
     records: dict[str, list[dict]] = {name: [] for name in names}
     applicable: dict[str, bool] = {}
+    train_cfg, _ = training_config(job.config, cell)
+    camera = train_cfg.scene.camera
     with tempfile.TemporaryDirectory(prefix="finepos-ablation-") as tmp:
         models = {}
         for name in names:
             variant = BY_NAME.get(name)
             if variant is not None and variant.recipe is None:
                 continue
-            config = job.config if variant is None else with_recipe(
-                job.config, variant.recipe(recipe_of(job.config)))
-            train_cfg, _ = training_config(config, cell)
+            config = train_cfg if variant is None else with_recipe(
+                train_cfg, variant.recipe(recipe_of(train_cfg)))
             try:
-                models[name] = train_cell(SYSTEM, train_cfg, cell, Path(tmp) / f"train-{name}")
+                models[name] = train_cell(SYSTEM, config, cell, Path(tmp) / f"train-{name}")
             except FineposError as exc:
                 models[name] = str(exc)
-        camera = training_config(job.config, cell)[0].scene.camera
         whole = models[WHOLE]
         for name in names:
             variant = BY_NAME.get(name)
